@@ -1,0 +1,342 @@
+"""Tests for enclab.ingest (pure conversions) and the end-to-end enclab.io.ingest_log on fixtures."""
+from __future__ import annotations
+
+import importlib.util
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from enclab import io
+from enclab.errors import EnclabInputError
+from enclab.ingest import canonicalize, detect_grid, off_grid, time_report, unwrap_counter
+from enclab.io import RawLog
+from enclab.manifest import validate_manifest
+
+FIXTURES = Path(__file__).parent / "fixtures" / "ingest"
+_spec = importlib.util.spec_from_file_location("make_fixtures", FIXTURES / "make_fixtures.py")
+fixtures = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(fixtures)
+COUNTS = np.asarray(fixtures.COUNTS)
+N = COUNTS.size
+DEVICES = {"axis": {"kind": "single_joint"}, "rail": {"kind": "single_joint", "unit": "m"}}
+META_KEYS = {"log_id", "source", "fs_hz", "n_samples", "device", "group", "tags", "time_report", "channels",
+             "analysis"}
+REPORT_KEYS = {"fs_hz", "median_dt_s", "n_samples", "n_repeated", "n_backwards", "n_gaps", "max_gap_s",
+               "jitter_rms_s", "trailing_empty_dropped", "nominal_rate_hz"}
+
+
+def entry(channels, time=None, **fields) -> dict:
+    base = {"id": "log1", "file": "x.csv", "format": "csv", "time": time or {"rate_hz": 100},
+            "channels": channels}
+    base.update(fields)
+    _, (normalised,) = validate_manifest({"logs": [base]}, DEVICES, "test.yaml")
+    return normalised
+
+
+def raw_log(values: dict, time=None, trailing=0) -> RawLog:
+    """A RawLog as the csv reader makes it: header on line 1, sample i on line i + 2."""
+    n = len(next(iter(values.values())))
+    lines = np.arange(2, n + 2)
+    return RawLog(file="x.csv", format="csv", channels={k: np.asarray(v, dtype=float) for k, v in values.items()},
+                  columns={k: f"col_{k}" for k in values}, locations=lines, row_label="line",
+                  time=None if time is None else np.asarray(time, dtype=float),
+                  time_file=None if time is None else "x.csv", time_column=None if time is None else "t",
+                  time_locations=None if time is None else lines, time_row_label="line",
+                  trailing_empty_dropped=trailing)
+
+
+def ch(name, **fields) -> dict:
+    return {"name": name, "column": name, "role": "aux", **fields}
+
+
+def convert(values, time=None, time_spec=None, **fields):
+    channels = [ch(name, **spec) for name, spec in fields.items()]
+    return canonicalize(raw_log(values, time), entry(channels, time_spec), DEVICES)
+
+
+# ----------------------------------------------------------------------------- units
+
+
+@pytest.mark.parametrize(
+    ("unit", "factor", "si"),
+    [("rad", 1.0, "rad"), ("deg", math.pi / 180, "rad"), ("mrad", 1e-3, "rad"), ("m", 1.0, "m"),
+     ("mm", 1e-3, "m")],
+)
+def test_float_units_are_converted_to_si(unit, factor, si):
+    values = np.array([0.0, 1.25, -3.5, 90.0])
+    df, meta = convert({"a": values}, a={"unit": unit})
+    assert df["a"].dtype == np.float64
+    np.testing.assert_allclose(df["a"], values * factor, rtol=1e-15)
+    assert meta["channels"][0] == {"name": "a", "role": "aux", "joint": None, "unit": si, "storage": "float",
+                                   "step": None, "native_step": None}
+
+
+def test_sign_flips_a_float_channel():
+    df, _ = convert({"a": [1.0, 2.0]}, a={"unit": "deg", "sign": -1})
+    np.testing.assert_allclose(df["a"], [-math.pi / 180, -math.pi / 90], rtol=1e-15)
+
+
+def test_counts_with_counts_per_rev_and_gear_ratio():
+    df, meta = convert({"m": [0.0, 5.0, -7.0]}, m={"unit": "counts", "counts_per_rev": 4196, "gear_ratio": 35,
+                                                  "sign": -1})
+    assert df["m"].dtype == np.int64
+    np.testing.assert_array_equal(df["m"], [0, -5, 7])
+    info = meta["channels"][0]
+    assert info["storage"] == "counts" and info["unit"] == "rad"
+    assert info["step"] == pytest.approx(2 * math.pi / (4196 * 35), rel=1e-15)
+
+
+def test_linear_counts_with_step():
+    df, meta = convert({"x": [3.0, 4.0]}, x={"unit": "counts", "axis": "linear", "step": 1e-6})
+    np.testing.assert_array_equal(df["x"], [3, 4])
+    assert meta["channels"][0]["unit"] == "m" and meta["channels"][0]["step"] == 1e-6
+
+
+def test_non_integer_counts_name_the_line():
+    with pytest.raises(EnclabInputError) as info:
+        convert({"m": [0.0, 1.0, 2.5]}, m={"unit": "counts", "counts_per_rev": 100})
+    assert (info.value.column, info.value.row, info.value.row_label) == ("col_m", 4, "line")
+    assert "not a whole number of counts" in str(info.value)
+
+
+# ----------------------------------------------------------------------------- counters and grids
+
+
+def test_unwrap_counter_8_bit_both_directions():
+    # every change is below half the 256-count range, so each wrap is recoverable
+    true = np.array([250, 253, 256, 260, 255, 249, 240, 300, 200, 100])
+    np.testing.assert_array_equal(unwrap_counter(true % 256, 8) - (true[0] % 256), true - true[0])
+
+
+def test_unwrap_counter_random_walk_matches_the_unwrapped_walk():
+    rng = np.random.default_rng(20240611)
+    # Steps below half the 12-bit range (2048) are recoverable; use up to 2000 counts.
+    true = np.cumsum(rng.integers(-2000, 2001, size=5000)) + 123_456
+    np.testing.assert_array_equal(unwrap_counter(true % 4096, 12), true - true[0] + true[0] % 4096)
+
+
+def test_unwrap_counter_rejects_bad_width():
+    with pytest.raises(ValueError, match="wrap_bits"):
+        unwrap_counter(np.arange(3), 1)
+
+
+def test_wrap_bits_in_a_channel_via_the_parquet_fixture():
+    e = entry([ch("c", unit="counts", counts_per_rev=1024, wrap_bits=8)],
+              time={"column": "index", "unit": "samples", "rate_hz": 100}, file="table.parquet", format="parquet")
+    e["channels"][0]["column"] = "counter"
+    df, _ = canonicalize(io.read_raw(e, FIXTURES), e, DEVICES)
+    # the fixture writes (250 + 4 * COUNTS) mod 256
+    np.testing.assert_array_equal(df["c"], 250 + 4 * COUNTS)
+
+
+def test_detect_grid_finds_an_exact_step_and_its_multiples():
+    step = 25 / 65536
+    rng = np.random.default_rng(7)
+    k = np.cumsum(rng.integers(-3, 4, size=2000)) + 40
+    found = detect_grid(k * step)
+    # the values carry only double rounding, so the least-squares step is exact to ~1e-15
+    assert found == pytest.approx(step, rel=1e-12)
+
+
+def test_detect_grid_with_large_multiples_and_print_rounding():
+    # 5e-8 m grid, positions near 0.245 m (4.9e6 multiples) as in the EMPS benchmark
+    rng = np.random.default_rng(11)
+    k = 4_900_000 + np.cumsum(rng.integers(-5, 6, size=3000))
+    found = detect_grid(k * 5e-8)
+    assert found == pytest.approx(5e-8, rel=1e-12)
+    assert off_grid(k * 5e-8, found).max() < 1e-6
+
+
+def test_detect_grid_rejects_smooth_and_constant_signals():
+    assert detect_grid(np.sin(np.linspace(0, 3, 500))) is None
+    assert detect_grid(np.full(10, 0.3)) is None
+
+
+def test_truth_channel_on_a_grid_is_stored_as_counts():
+    step = math.radians(450 / 128)  # the 10-bit potentiometer of the dcmotor log
+    values = np.round(np.degrees(step * COUNTS), 2)  # printed with 2 decimals, as in the log
+    df, meta = convert({"y": values}, y={"unit": "deg", "role": "truth", "joint": 1})
+    np.testing.assert_array_equal(df["y"], COUNTS)
+    # 2-decimal printing moves a value by at most 0.005 deg = 0.0014 step; the fitted step keeps
+    # sum(k * error) / sum(k^2) ~ 1e-4 relative at most for these 12 samples
+    assert meta["channels"][0]["step"] == pytest.approx(step, rel=2e-4)
+    assert meta["channels"][0]["storage"] == "counts"
+
+
+def test_detect_grid_false_keeps_float():
+    df, meta = convert({"y": COUNTS * 0.01}, y={"role": "truth", "joint": 1, "detect_grid": False})
+    assert meta["channels"][0]["storage"] == "float" and df["y"].dtype == np.float64
+
+
+def test_declared_native_step():
+    df, meta = convert({"y": COUNTS * 1e-3 + 4e-3}, y={"unit": "mrad", "native_step": 1e-6, "sign": -1})
+    np.testing.assert_array_equal(df["y"], -(COUNTS + 4))
+    assert meta["channels"][0]["step"] == 1e-6 and meta["channels"][0]["native_step"] == 1e-6
+
+
+def test_off_declared_grid_names_the_worst_line():
+    values = COUNTS * 1e-3
+    values[5] += 0.03e-3  # 0.03 step off
+    with pytest.raises(EnclabInputError) as info:
+        convert({"y": values}, y={"native_step": 1e-3})
+    assert (info.value.column, info.value.row) == ("col_y", 7)
+    assert "0.030 steps off the declared grid" in str(info.value)
+
+
+# ----------------------------------------------------------------------------- time base
+
+
+@pytest.mark.parametrize(("unit", "scale"), [("s", 1.0), ("ms", 1e-3), ("us", 1e-6)])
+def test_time_column_units(unit, scale):
+    stamps = np.arange(5) * 0.002 / scale
+    df, meta = convert({"a": np.zeros(5)}, time=stamps, time_spec={"column": "t", "unit": unit}, a={})
+    np.testing.assert_allclose(df["t"], np.arange(5) * 0.002, rtol=1e-12)
+    assert meta["fs_hz"] == pytest.approx(500.0, rel=1e-9)
+
+
+def test_sample_index_time_and_rate_only_time():
+    df, meta = convert({"a": np.zeros(4)}, time=[10, 11, 12, 13],
+                       time_spec={"column": "t", "unit": "samples", "rate_hz": 1000}, a={})
+    np.testing.assert_allclose(df["t"], [0.010, 0.011, 0.012, 0.013])
+    assert meta["fs_hz"] == 1000.0
+    df, meta = convert({"a": np.zeros(4)}, time_spec={"rate_hz": 250}, a={})
+    np.testing.assert_array_equal(df["t"], np.arange(4) / 250)
+    assert meta["fs_hz"] == 250.0 and meta["time_report"]["n_gaps"] == 0
+
+
+def test_crop_keeps_the_closed_interval():
+    df, _ = convert({"a": np.arange(10.0)}, time_spec={"rate_hz": 10}, a={})
+    assert len(df) == 10
+    e = entry([ch("a")], {"rate_hz": 10}, crop={"t_start": 0.2, "t_end": 0.5})
+    df, meta = canonicalize(raw_log({"a": np.arange(10.0)}), e, DEVICES)
+    np.testing.assert_array_equal(df["a"], [2.0, 3.0, 4.0, 5.0])
+    assert meta["n_samples"] == 4 == meta["time_report"]["n_samples"]
+
+
+def test_crop_excludes_nan_outside_but_not_inside():
+    values = np.arange(10.0)
+    values[8] = np.nan
+    e = entry([ch("a")], {"rate_hz": 10}, crop={"t_end": 0.7})
+    df, _ = canonicalize(raw_log({"a": values}), e, DEVICES)
+    assert len(df) == 8
+    e = entry([ch("a")], {"rate_hz": 10}, crop={"t_end": 0.85})
+    with pytest.raises(EnclabInputError) as info:
+        canonicalize(raw_log({"a": values}), e, DEVICES)
+    assert (info.value.column, info.value.row) == ("col_a", 10)
+
+
+def test_crop_leaving_too_few_samples():
+    e = entry([ch("a")], {"rate_hz": 10}, crop={"t_start": 5.0})
+    with pytest.raises(EnclabInputError, match="0 samples left after the crop"):
+        canonicalize(raw_log({"a": np.arange(10.0)}), e, DEVICES)
+
+
+def test_backwards_time_names_the_row():
+    with pytest.raises(EnclabInputError) as info:
+        convert({"a": np.zeros(5)}, time=[0.0, 0.1, 0.2, 0.15, 0.3], time_spec={"column": "t"}, a={})
+    assert (info.value.file, info.value.column, info.value.row) == ("x.csv", "t", 5)
+    assert "time goes backwards" in str(info.value)
+
+
+def test_repeats_gaps_and_jitter_are_reported():
+    # steps: 0.01, 0.011, 0.009 repeated (median 0.01), one repeated stamp, one 0.05 s gap
+    dt = np.tile([0.01, 0.011, 0.009], 10)
+    dt[4] = 0.0
+    dt[20] = 0.05
+    t = np.concatenate(([0.0], np.cumsum(dt)))
+    report = time_report(t, 100.0, trailing_empty_dropped=2)
+    assert set(report) == REPORT_KEYS
+    assert report["n_repeated"] == 1 and report["n_gaps"] == 1 and report["n_backwards"] == 0
+    assert report["max_gap_s"] == pytest.approx(0.05)
+    assert report["median_dt_s"] == pytest.approx(0.01) and report["fs_hz"] == pytest.approx(100.0)
+    # regular steps: 28 left, deviations of 0, +1 ms, -1 ms in equal shares up to the removed ones
+    regular = np.delete(dt, [4, 20])
+    assert report["jitter_rms_s"] == pytest.approx(np.sqrt(np.mean((regular - 0.01) ** 2)), rel=1e-9)
+    assert report["n_samples"] == 31 and report["trailing_empty_dropped"] == 2
+    assert report["nominal_rate_hz"] == 100.0
+
+
+def test_time_file_fixture_reports_the_repeat_and_the_gap():
+    e = entry([ch("q1", column=0)], {"file": "sample_major_time.txt", "nominal_rate_hz": 100},
+              file="sample_major.txt", format="text", reader={"values_per_sample": 2})
+    df, meta = io.ingest_log(e, FIXTURES, DEVICES)
+    report = meta["time_report"]
+    # the repeated stamp of sample 5 makes the next step a double one: two gaps in all
+    assert (report["n_repeated"], report["n_gaps"]) == (1, 2)
+    assert report["max_gap_s"] == pytest.approx(0.03, abs=2e-6)  # stamps printed with 6 decimals
+    np.testing.assert_array_equal(df["q1"], fixtures.STEP * COUNTS)
+
+
+@pytest.mark.parametrize(("nominal", "ok"), [(104.0, True), (96.0, True), (106.0, False), (50.0, False)])
+def test_nominal_rate_tolerance_is_five_percent(nominal, ok):
+    time_spec = {"column": "t", "nominal_rate_hz": nominal}
+    args = ({"a": np.zeros(6)},)
+    kwargs = dict(time=np.arange(6) / 100.0, time_spec=time_spec, a={})
+    if ok:
+        convert(*args, **kwargs)
+    else:
+        with pytest.raises(EnclabInputError) as info:
+            convert(*args, **kwargs)
+        assert info.value.key == "time.nominal_rate_hz" and "not the nominal" in str(info.value)
+
+
+def test_all_equal_time_stamps_are_an_error():
+    with pytest.raises(EnclabInputError, match="every time stamp is the same"):
+        convert({"a": np.zeros(3)}, time=[1.0, 1.0, 1.0], time_spec={"column": "t"}, a={})
+
+
+# ----------------------------------------------------------------------------- metadata
+
+
+def test_metadata_layout_and_device_resolution():
+    e = entry([ch("theta", role="truth", joint=1, unit="counts", counts_per_rev=8192)], device="axis",
+              group="g1", tags=["a", "b"], analysis={"requantize": {"multiples": [8]}})
+    df, meta = canonicalize(raw_log({"theta": COUNTS}), e, DEVICES)
+    assert set(meta) == META_KEYS
+    assert list(df.columns) == ["t", "theta"] and df["t"].dtype == np.float64
+    assert meta["source"] == {"file": "x.csv", "sha256": None, "format": "csv"}
+    assert meta["device"] == {"kind": "single_joint"} and meta["device"] is not DEVICES["axis"]
+    assert (meta["log_id"], meta["group"], meta["tags"]) == ("log1", "g1", ["a", "b"])
+    assert meta["analysis"] == {"requantize": {"multiples": [8]}}
+    assert meta["n_samples"] == N and meta["fs_hz"] == 100.0
+
+
+def test_inline_and_missing_device():
+    e = entry([ch("a")], device={"kind": "planar_2r", "l1": 0.2})
+    assert canonicalize(raw_log({"a": [0.0, 1.0]}), e, DEVICES)[1]["device"] == {"kind": "planar_2r", "l1": 0.2}
+    assert canonicalize(raw_log({"a": [0.0, 1.0]}), entry([ch("a")]), DEVICES)[1]["device"] is None
+    e = entry([ch("a")], device="axis")
+    with pytest.raises(EnclabInputError, match="unknown device 'axis'"):
+        canonicalize(raw_log({"a": [0.0, 1.0]}), e, {})
+
+
+def test_ingest_log_end_to_end_on_the_mrdlab_style_fixture(tmp_path):
+    e = entry([ch("a", column="Encoder A [counts]", role="truth", joint=1, unit="counts", counts_per_rev=4096),
+               ch("b", column="Encoder B [counts]", role="measured", joint=1, unit="counts", counts_per_rev=8192,
+                  sign=-1)],
+              {"column": "Time [s]", "nominal_rate_hz": 100}, file="mrd_style.txt", format="text",
+              reader={"comment": "%", "column_names": "last_comment"})
+    df, meta = io.ingest_log(e, FIXTURES, DEVICES)
+    assert meta["source"]["sha256"] == io.file_sha256(FIXTURES / "mrd_style.txt")
+    steps = {c["name"]: c["step"] for c in meta["channels"]}
+    # channel b counts -2 * COUNTS on an encoder twice as fine with the opposite sign: same angle
+    np.testing.assert_allclose(df["a"] * steps["a"], df["b"] * steps["b"], rtol=1e-15)
+    io.write_canonical(df, meta, tmp_path / "c.parquet")
+    back, back_meta = io.read_canonical(tmp_path / "c.parquet")
+    assert back_meta == meta
+    assert back["a"].dtype == np.int64
+
+
+def test_ingest_csv_fixture_in_every_unit():
+    e = entry([ch("deg", column="theta_deg", unit="deg"), ch("mrad", column="theta_mrad", unit="mrad"),
+               ch("enc", unit="counts", counts_per_rev=fixtures.CPR), ch("x", column="x_mm", unit="mm")],
+              {"column": "time_ms", "unit": "ms"}, file="basic.csv")
+    df, meta = io.ingest_log(e, FIXTURES, DEVICES)
+    theta = fixtures.STEP * COUNTS
+    np.testing.assert_allclose(df["deg"], theta, rtol=1e-14, atol=1e-16)
+    np.testing.assert_allclose(df["mrad"], theta, rtol=1e-14, atol=1e-16)
+    np.testing.assert_allclose(df["enc"] * meta["channels"][2]["step"], theta, rtol=1e-15)
+    np.testing.assert_allclose(df["x"], 0.5e-3 * COUNTS, rtol=1e-15)
+    np.testing.assert_allclose(df["t"], np.arange(N) / 100, rtol=1e-15)
