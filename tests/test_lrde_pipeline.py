@@ -1,0 +1,83 @@
+"""Pipeline, report block and figure structure for the LRDE analysis (no pixel tests)."""
+import json
+
+import numpy as np
+import pytest
+from matplotlib.figure import Figure
+
+from enclab.lrde import dwell, fit, pipeline, plots, simulate
+
+STEP = simulate.ROS_DRILL_STEP
+FAST = {"n_ensembles": 2, "n_walkers": 16, "n_steps": 120, "n_burn": 80, "ppc_draws": 8}
+
+
+def _canonical(seed=21, with_measured=True):
+    df, p = simulate.open_loop_log(np.random.default_rng(seed), A12=3.44 * STEP,
+                                   bias=0.1 * STEP, offset_frac=0.35, n_cycles=4,
+                                   noise_std=0.02 * STEP, truth_step=STEP / 100)
+    channels = [{"name": "fine", "role": "truth", "joint": 1, "unit": "rad",
+                 "storage": "counts", "step": STEP / 100}]
+    out = df.rename(columns={"counts": "coarse", "truth_counts": "fine"})
+    if with_measured:
+        channels.append({"name": "coarse", "role": "measured", "joint": 1, "unit": "rad",
+                         "storage": "counts", "step": STEP})
+    else:
+        out = out.drop(columns="coarse")
+    return out, {"log_id": "sim_lrde", "channels": channels}, p
+
+
+def test_analyse_lrde_log_block_matches_design_contract():
+    df, meta, p = _canonical()
+    block, figures, md, cycles = pipeline.analyse_lrde_log(df, meta, seed=5, settings=FAST)
+    for key in ("A12", "a_eq", "E_b", "f_hz", "offset_a", "bias_b"):
+        assert set(block[key]) == {"median", "q05", "q95"}
+        assert block[key]["q05"] <= block[key]["median"] <= block[key]["q95"]
+    assert set(block["diagnostics"]) == {"rhat_max", "ess_min", "tau_max", "converged"}
+    assert block["dwell_formula_A12"] == pytest.approx(p["A12"], rel=0.05)
+    assert block["A12"]["q05"] < p["A12"] < block["A12"]["q95"]
+    # The truth channel identifies the offset (to the truth's 0.01-step rounding).
+    assert block["offset_a"]["median"] == pytest.approx(p["offset_a"], abs=0.02 * STEP)
+    json.dumps(block)  # JSON-serialisable
+    assert set(figures) == {"corner", "dwell_ppc"}
+    assert all(isinstance(f, Figure) for f in figures.values())
+    assert "stroke A12" in md and "Sampler diagnostics" in md
+    assert list(cycles.columns) == dwell.CYCLE_COLUMNS and len(cycles) >= 3
+
+
+def test_requantized_truth_and_unidentified_offset():
+    df, meta, p = _canonical(with_measured=False)
+    settings = dict(FAST, requantize={"step": STEP, "offset_frac": 0.35}, use_truth=False)
+    block, _, md, _ = pipeline.analyse_lrde_log(df, meta, seed=1, settings=settings)
+    assert block["channels"]["requantized"] is True
+    assert block["offset_a"] is None and block["bias_b"] is None
+    assert "a_eq = a + b" in block["reason"] and "not identified" in md
+    with pytest.raises(ValueError, match="requantize"):
+        pipeline.analyse_lrde_log(df, meta, seed=1, settings=FAST)
+    with pytest.raises(ValueError, match="unknown lrde settings"):
+        pipeline.analyse_lrde_log(df, meta, seed=1, settings={"n_walker": 3})
+
+
+def test_figures_structure():
+    df, meta, p = _canonical()
+    t = df["t"].to_numpy()
+    r = fit.fit_sinusoid(t, df["coarse"].to_numpy(), STEP, seed=2, n_ensembles=2, n_walkers=16,
+                         n_steps=80, n_burn=60)
+    fig = plots.corner_plot(r, truths={"A12": p["A12"], "E_b": p["E_b"]})
+    assert len(fig.axes) == 25
+    assert fig.axes[20].get_xlabel() == r"$A_{12}$ [deg]"
+    cycles = dwell.cycle_table(df["coarse"].to_numpy(), t, STEP)
+    pred = plots.posterior_predictive_dwell(r, t, seed=0, n_draws=5)
+    assert set(pred["draw"]) == set(range(5))
+    fig2 = plots.dwell_ppc_plot(cycles, pred)
+    ax = fig2.axes[0]
+    assert ax.get_ylabel() == "dwell half-width [ms]"
+    # Observed markers carry exactly the observed widths (ms).
+    observed = [line for line in ax.get_lines() if line.get_label() == "top dwell $w_1$, observed"]
+    np.testing.assert_allclose(observed[0].get_ydata(), 1e3 * cycles["w1"])
+    cl_df, cl_p = simulate.closed_loop_pid_log(np.random.default_rng(0), n_cycles=10)
+    fig3 = plots.closed_loop_plot(cl_df, cl_p)
+    assert fig3.axes[0].get_ylabel() == "bias deviation [deg]"
+    dev_line = fig3.axes[0].get_lines()[0]
+    cb = simulate.cycle_bias(cl_df["t"].to_numpy(), cl_df["theta"].to_numpy(), cl_p["f_hz"])
+    np.testing.assert_allclose(dev_line.get_ydata(),
+                               np.rad2deg(cb["bias"] - cl_p["ideal_bias"]))

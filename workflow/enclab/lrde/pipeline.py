@@ -1,0 +1,153 @@
+"""One canonical log in, the ``lrde`` block, figures, report and cycle table out.
+
+Channel selection (canonical log contract, ``docs/architecture.md``):
+
+- measured coarse channel: ``settings["channel"]`` if given, else the first channel with
+  role ``"measured"`` and storage ``"counts"``;
+- truth channel: the first channel with role ``"truth"`` (same joint as the measured one when
+  several); its angle is ``counts * step`` (counts storage) or the float column (rad);
+- no measured channel but ``settings["requantize"] = {"step": s, "offset_frac": f}``: the
+  truth is re-quantized with :func:`enclab.quantize.quantize` (``floor(theta/s + f)``) and
+  becomes the measured channel.
+
+With a truth channel (and ``settings["use_truth"]``, default True) the fit reports the offset
+``a`` and the bias ``b`` in the truth channel's frame; with ``settings["rest_position"]`` (rad)
+it uses that known motion centre; otherwise both are None with the reason.
+
+Settings keys (all optional): ``channel``, ``requantize``, ``use_truth``, ``rest_position``,
+``f_hz``, ``n_ensembles`` (4), ``n_walkers`` (32), ``n_steps`` (250), ``n_burn`` (150),
+``ppc_draws`` (40).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from enclab.lrde import dwell, fit, plots, report
+
+__all__ = ["select_channels", "analyse_lrde_log"]
+
+_KNOWN_SETTINGS = {"channel", "requantize", "use_truth", "rest_position", "f_hz", "n_ensembles",
+                   "n_walkers", "n_steps", "n_burn", "ppc_draws"}
+
+
+def _angle(df: pd.DataFrame, channel: dict) -> np.ndarray:
+    values = df[channel["name"]].to_numpy()
+    if channel.get("storage") == "counts":
+        return values.astype(float) * float(channel["step"])
+    return values.astype(float)
+
+
+def select_channels(df: pd.DataFrame, meta: dict, settings: dict):
+    """Pick the coarse counts, their step and the truth angle of a canonical log.
+
+    Returns
+    -------
+    counts : numpy.ndarray of int64
+    step : float
+    truth : numpy.ndarray or None
+        True angle in rad, or None.
+    info : dict
+        ``measured`` and ``truth`` channel names and ``requantized`` (bool).
+    """
+    channels = meta.get("channels")
+    if not channels:
+        raise ValueError("meta['channels'] is missing or empty")
+    for ch in channels:
+        if ch.get("name") not in df.columns:
+            raise ValueError(f"channel {ch.get('name')!r} of meta is not a column of df")
+    wanted = settings.get("channel")
+    if wanted is not None:
+        measured = [ch for ch in channels if ch["name"] == wanted]
+        if not measured:
+            raise ValueError(f"settings['channel'] = {wanted!r} is not a channel of the log")
+    else:
+        measured = [ch for ch in channels
+                    if ch.get("role") == "measured" and ch.get("storage") == "counts"]
+    measured = measured[0] if measured else None
+    truths = [ch for ch in channels if ch.get("role") == "truth"]
+    if measured is not None and truths:
+        same_joint = [ch for ch in truths if ch.get("joint") == measured.get("joint")]
+        truths = same_joint or truths
+    truth_ch = truths[0] if truths else None
+    truth = _angle(df, truth_ch) if truth_ch is not None else None
+    if measured is not None:
+        if measured.get("storage") != "counts" or not measured.get("step"):
+            raise ValueError(f"measured channel {measured['name']!r} must be stored as counts "
+                             f"with a step, got storage={measured.get('storage')!r}")
+        counts = df[measured["name"]].to_numpy().astype(np.int64)
+        return counts, float(measured["step"]), truth, {
+            "measured": measured["name"], "truth": truth_ch and truth_ch["name"],
+            "requantized": False}
+    req = settings.get("requantize")
+    if truth is None or not req:
+        raise ValueError("the log has no measured counts channel; give settings['requantize'] "
+                         "= {'step': ..., 'offset_frac': ...} and a truth channel")
+    from enclab.quantize import quantize
+
+    if "step" not in req:
+        raise ValueError(f"settings['requantize'] needs 'step', got {req!r}")
+    step = float(req["step"])
+    counts = quantize(truth, step, float(req.get("offset_frac", 0.5)))
+    return counts, step, truth, {"measured": None, "truth": truth_ch["name"],
+                                 "requantized": True}
+
+
+def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict):
+    """Dwell baselines and the Bayesian fit of one canonical log.
+
+    Parameters
+    ----------
+    df : pandas.DataFrame
+        Canonical log: ``t`` (s) and one column per channel.
+    meta : dict
+        Canonical metadata (``channels``: ``name, role, joint, unit, storage, step``;
+        ``log_id`` optional).
+    seed : int
+        Root seed of the fit and of the posterior-predictive draws.
+    settings : dict
+        See the module docstring.
+
+    Returns
+    -------
+    block : dict
+        The ``lrde`` block of ``summary.json`` (:func:`enclab.lrde.report.summary_block`)
+        plus ``channels`` (what was used).
+    figures : dict of str to matplotlib.figure.Figure
+        ``"corner"`` and ``"dwell_ppc"``.
+    report_md : str
+    cycles : pandas.DataFrame
+        :func:`enclab.lrde.dwell.cycle_table` of the measured counts.
+    """
+    if "t" not in df.columns:
+        raise ValueError("df must have a time column 't' in seconds")
+    settings = dict(settings or {})
+    unknown = set(settings) - _KNOWN_SETTINGS
+    if unknown:
+        raise ValueError(f"unknown lrde settings {sorted(unknown)}; known: "
+                         f"{sorted(_KNOWN_SETTINGS)}")
+    t = df["t"].to_numpy(dtype=float)
+    counts, step, truth, info = select_channels(df, meta, settings)
+    f_hz = settings.get("f_hz")
+    cycles = dwell.cycle_table(counts, t, step, f_hz=f_hz)
+    summary = dwell.dwell_summary(cycles)
+    root = np.random.SeedSequence(seed)
+    fit_seed, ppc_seed = root.spawn(2)
+    result = fit.fit_sinusoid(
+        t, counts, step, fit_seed,
+        n_ensembles=int(settings.get("n_ensembles", 4)),
+        n_walkers=int(settings.get("n_walkers", 32)),
+        n_steps=int(settings.get("n_steps", 250)),
+        n_burn=int(settings.get("n_burn", 150)),
+        f_hz=f_hz,
+        truth=truth if settings.get("use_truth", True) else None,
+        rest_position=settings.get("rest_position"),
+    )
+    block = report.summary_block(result, summary)
+    block["channels"] = info
+    predictive = plots.posterior_predictive_dwell(result, t, ppc_seed,
+                                                  n_draws=int(settings.get("ppc_draws", 40)))
+    figures = {"corner": plots.corner_plot(result),
+               "dwell_ppc": plots.dwell_ppc_plot(cycles, predictive)}
+    report_md = report.report_markdown(block, meta.get("log_id"))
+    return block, figures, report_md, cycles

@@ -1,0 +1,149 @@
+"""Figures of the extreme low-resolution encoder analysis (paper 002).
+
+Each function returns a :class:`matplotlib.figure.Figure` built without ``pyplot`` (nothing
+global to close); the caller saves it. Angles are shown in degrees (the paper's unit), the
+data stay SI.
+
+References
+----------
+.. [1] Z. Zhang and Q. Gao, "Characterization of Extreme Low-Resolution Digital Encoder for
+   Control System with Sinusoidal Reference Signal", Figs. 2 and 6.
+"""
+from __future__ import annotations
+
+import corner
+import numpy as np
+import pandas as pd
+from matplotlib.figure import Figure
+
+from enclab.lrde import dwell, model, simulate
+
+__all__ = ["corner_plot", "posterior_predictive_dwell", "dwell_ppc_plot", "closed_loop_plot"]
+
+_DEG = 180.0 / np.pi
+
+
+def corner_plot(fit, truths: dict | None = None) -> Figure:
+    """Corner plot of ``A12``, ``E_b`` (deg), ``f`` (Hz), ``phase`` (rad), ``sigma`` (deg).
+
+    Parameters
+    ----------
+    fit : enclab.lrde.fit.FitResult
+    truths : dict, optional
+        True values (SI) by parameter name, drawn as lines (simulated data).
+    """
+    scale = np.array([_DEG, _DEG, 1.0, 1.0, _DEG])
+    labels = [r"$A_{12}$ [deg]", r"$E_b$ [deg]", r"$f$ [Hz]", r"phase [rad]",
+              r"$\sigma$ [deg]"]
+    data = fit.samples * scale
+    truth_values = None
+    if truths is not None:
+        truth_values = [truths[name] * s if truths.get(name) is not None else None
+                        for name, s in zip(fit.param_names, scale)]
+    fig = Figure(figsize=(8, 8))
+    corner.corner(data, labels=labels, quantiles=[0.05, 0.5, 0.95], truths=truth_values,
+                  fig=fig, show_titles=True, title_fmt=".4g")
+    return fig
+
+
+def posterior_predictive_dwell(fit, t, seed, n_draws=40) -> pd.DataFrame:
+    """Per-cycle dwell half-widths of counts simulated from posterior draws.
+
+    Each draw re-reads its sinusoid (with its own ``sigma`` of position noise) at the
+    observed times and runs :func:`enclab.lrde.dwell.cycle_table` on it.
+
+    Returns
+    -------
+    pandas.DataFrame
+        ``draw, cycle, w1, w2, steps_pp``.
+    """
+    if isinstance(n_draws, bool) or not isinstance(n_draws, (int, np.integer)) or n_draws < 1:
+        raise ValueError(f"n_draws must be a positive integer, got {n_draws!r}")
+    rng = np.random.default_rng(seed)
+    t = np.asarray(t, dtype=float)
+    idx = rng.choice(fit.samples.shape[0], size=n_draws, replace=False)
+    frames = []
+    for d, i in enumerate(idx):
+        A12, E_b, f_hz, phase, sigma = fit.samples[i]
+        a_eq = (fit.centre_count + 0.5) * fit.step + E_b
+        theta = 0.5 * A12 * np.sin(2 * np.pi * f_hz * (t - fit.t_ref) + phase)
+        theta = theta + rng.normal(0.0, sigma, t.size)
+        counts = model.encoder_counts(theta, fit.step, a_eq)
+        table = dwell.cycle_table(counts, t, fit.step, f_hz=float(f_hz))
+        frames.append(pd.DataFrame({"draw": d, "cycle": table["cycle"], "w1": table["w1"],
+                                    "w2": table["w2"], "steps_pp": table["steps_pp"]}))
+    return pd.concat(frames, ignore_index=True)
+
+
+def dwell_ppc_plot(cycles: pd.DataFrame, predictive: pd.DataFrame) -> Figure:
+    """Observed dwell half-widths per cycle against the posterior predictive distribution.
+
+    Left: ``w1`` and ``w2`` (ms) per cycle, observed as markers, predictive 5-95 % band.
+    Right: histograms of the observed and predicted ``w1 - w2`` (the bias signal of
+    Proposition 2: a longer top dwell means ``E_b > 0``).
+    """
+    for name, frame, cols in (("cycles", cycles, ("cycle", "w1", "w2")),
+                              ("predictive", predictive, ("cycle", "w1", "w2"))):
+        missing = set(cols) - set(frame.columns)
+        if missing:
+            raise ValueError(f"{name} lacks columns {sorted(missing)}")
+    fig = Figure(figsize=(10, 4), layout="constrained")
+    ax_w, ax_d = fig.subplots(1, 2)
+    band = predictive.groupby("cycle")[["w1", "w2"]].quantile([0.05, 0.95]).unstack()
+    for col, colour, label in (("w1", "C0", "top dwell $w_1$"), ("w2", "C1",
+                                                                 "bottom dwell $w_2$")):
+        ax_w.fill_between(band.index, 1e3 * band[(col, 0.05)], 1e3 * band[(col, 0.95)],
+                          color=colour, alpha=0.25, step="mid",
+                          label=f"{label}, predictive 90 %")
+        ax_w.plot(cycles["cycle"], 1e3 * cycles[col], "o", color=colour, ms=4,
+                  label=f"{label}, observed")
+    ax_w.set_xlabel("cycle")
+    ax_w.set_ylabel("dwell half-width [ms]")
+    ax_w.legend(fontsize=7)
+    diff_obs = 1e3 * (cycles["w1"] - cycles["w2"]).to_numpy()
+    diff_pred = 1e3 * (predictive["w1"] - predictive["w2"]).to_numpy()
+    finite = np.concatenate((diff_obs, diff_pred))
+    finite = finite[np.isfinite(finite)]
+    bins = np.linspace(finite.min(), finite.max(), 30) if finite.size else 10
+    ax_d.hist(diff_pred[np.isfinite(diff_pred)], bins=bins, density=True, alpha=0.5,
+              color="C2", label="posterior predictive")
+    ax_d.hist(diff_obs[np.isfinite(diff_obs)], bins=bins, density=True, histtype="step",
+              color="k", label="observed")
+    ax_d.set_xlabel(r"$w_1 - w_2$ [ms]")
+    ax_d.set_ylabel("density")
+    ax_d.legend(fontsize=7)
+    return fig
+
+
+def closed_loop_plot(df: pd.DataFrame, params: dict) -> Figure:
+    """Fig. 6 equivalent: per-cycle bias relative to the ideal bias, with Prop. 1's band.
+
+    Parameters
+    ----------
+    df, params
+        Output of :func:`enclab.lrde.simulate.closed_loop_pid_log` (needs ``t``, ``theta``,
+        ``counts``; ``step``, ``ideal_bias``, ``f_hz``).
+    """
+    missing = {"t", "theta", "counts"} - set(df.columns)
+    if missing:
+        raise ValueError(f"df lacks columns {sorted(missing)}")
+    per_cycle = simulate.cycle_bias(df["t"].to_numpy(), df["theta"].to_numpy(), params["f_hz"])
+    step = params["step"]
+    half_eps = 0.5 * np.asarray(model.epsilon(per_cycle["A12"].to_numpy(), step))
+    dev = per_cycle["bias"].to_numpy() - params["ideal_bias"]
+    fig = Figure(figsize=(8, 6), layout="constrained")
+    ax_b, ax_r = fig.subplots(2, 1, sharex=True)
+    ax_b.plot(per_cycle["t_mid"], _DEG * dev, "o-", ms=3,
+              label=r"$A_{12-b} - \overline{A_{12-b}}$ (per cycle)")
+    ax_b.plot(per_cycle["t_mid"], _DEG * half_eps, "k--", label=r"$\pm\varepsilon/2$")
+    ax_b.plot(per_cycle["t_mid"], -_DEG * half_eps, "k--")
+    ax_b.axhline(0.0, color="0.5", lw=0.8)
+    ax_b.set_ylabel("bias deviation [deg]")
+    ax_b.legend(fontsize=8)
+    ax_r.plot(df["t"], _DEG * df["theta"], lw=0.8, label=r"true $\theta$")
+    ax_r.step(df["t"], _DEG * step * df["counts"], where="post", lw=0.8,
+              label=r"reading $\theta_{enc}$")
+    ax_r.set_xlabel("time [s]")
+    ax_r.set_ylabel("angle [deg]")
+    ax_r.legend(fontsize=8)
+    return fig
