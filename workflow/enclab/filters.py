@@ -35,7 +35,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
-import scipy.signal
 from scipy.special import gammaln
 
 __all__ = [
@@ -304,6 +303,8 @@ def apply(filt: DerivativeFilter, x, fs_hz: float, axis: int = 0, zi=None, retur
             zi = np.broadcast_to(zi.reshape(along), state_shape).copy()
         if zi.shape != state_shape:
             raise ValueError(f"zi must have shape {state_shape} (or ({n_state},)), got {zi.shape}")
+    import scipy.signal  # deferred: ~0.6 s of import that ingest-only jobs need not pay
+
     y, zf = scipy.signal.lfilter(b, a, x, axis=axis, zi=zi)
     return (y, zf) if return_state else y
 
@@ -336,6 +337,8 @@ def _tail_envelope(b: np.ndarray, pole_radius: float, n: int, length: int) -> tu
 def _impulse(b: np.ndarray, a: np.ndarray, length: int) -> np.ndarray:
     impulse = np.zeros(length)
     impulse[0] = 1.0
+    import scipy.signal
+
     return scipy.signal.lfilter(b, a, impulse)
 
 
@@ -434,6 +437,8 @@ def _section_realization(b: np.ndarray, a: np.ndarray):
     size = max(len(a), len(b))
     b_pad = np.concatenate([b, np.zeros(size - len(b))])
     a_pad = np.concatenate([a, np.zeros(size - len(a))])
+    import scipy.signal
+
     return scipy.signal.tf2ss(b_pad, a_pad)
 
 

@@ -22,7 +22,6 @@ from __future__ import annotations
 import numbers
 
 import numpy as np
-import scipy.stats
 
 __all__ = ["error_moments", "pooled_std_ratio"]
 
@@ -44,6 +43,8 @@ def _t_interval(estimates: np.ndarray, weights: np.ndarray, ci_level: float):
     center = np.sum(w * estimates, axis=0)
     sum_w2 = float(np.sum(weights**2))
     spread_sq = np.sum(w * (estimates - center) ** 2, axis=0) / (1.0 - sum_w2)
+    import scipy.stats  # deferred: heavy import, needed only for the interval
+
     quantile = scipy.stats.t.ppf(0.5 + ci_level / 2.0, df=estimates.shape[0] - 1)
     return center, quantile * np.sqrt(sum_w2 * spread_sq)
 

@@ -77,7 +77,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.signal
 
 __all__ = [
     "QuantizerErrorModel",
@@ -338,6 +337,8 @@ def impulse_autocorrelation(h) -> np.ndarray:
     input with autocovariance ``C`` is ``r_h(0) C(0) + 2 sum_{m>=1} r_h(m) C(m)``.
     """
     h = _impulse(h)
+    import scipy.signal  # deferred, see enclab.filters.apply
+
     return scipy.signal.correlate(h, h, mode="full", method="direct")[h.size - 1 :]
 
 
@@ -852,6 +853,8 @@ def worst_case_trajectory_derivative(bound_x, h) -> np.ndarray:
     if not np.all(np.isfinite(bound)) or np.any(bound < 0):
         raise ValueError("bound_x must be finite and non-negative")
     padded = np.concatenate([np.repeat(bound[:1], h.size - 1, axis=0), bound], axis=0)
+    import scipy.signal
+
     return scipy.signal.lfilter(np.abs(h), [1.0], padded, axis=0)[h.size - 1 :]
 
 
