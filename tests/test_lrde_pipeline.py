@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from matplotlib.figure import Figure
 
-from enclab.lrde import dwell, fit, pipeline, plots, simulate
+from enclab.lrde import dwell, fit, pipeline, plots, report, simulate
 
 STEP = simulate.ROS_DRILL_STEP
 FAST = {"n_ensembles": 2, "n_walkers": 16, "n_steps": 120, "n_burn": 80, "ppc_draws": 8}
@@ -42,6 +42,22 @@ def test_analyse_lrde_log_block_matches_design_contract():
     assert all(isinstance(f, Figure) for f in figures.values())
     assert "stroke A12" in md and "Sampler diagnostics" in md
     assert list(cycles.columns) == dwell.CYCLE_COLUMNS and len(cycles) >= 3
+
+
+def test_batch_rows_carry_posterior_and_diagnostics():
+    df, meta, p = _canonical()
+    block, _, _, _ = pipeline.analyse_lrde_log(df, meta, seed=5, settings=FAST)
+    rows = {r["quantity"]: r for r in report.batch_rows("sim_lrde", block)}
+    assert set(rows) == {"A12", "E_b", "a_eq", "offset_a", "bias_b", "f_hz", "sigma"}
+    assert rows["A12"]["median"] == block["A12"]["median"]
+    assert rows["A12"]["dwell_formula_A12"] == block["dwell_formula_A12"]
+    assert rows["E_b"]["dwell_formula_A12"] is None
+    assert all(r["converged"] == block["diagnostics"]["converged"] for r in rows.values())
+    assert rows["offset_a"]["reason"] is None  # identified through the truth channel
+    unidentified = dict(block, offset_a=None, bias_b=None, reason="no truth channel")
+    rows = {r["quantity"]: r for r in report.batch_rows("x", unidentified)}
+    assert rows["bias_b"]["median"] is None and rows["bias_b"]["reason"] == "no truth channel"
+    assert rows["A12"]["reason"] is None
 
 
 def test_requantized_truth_and_unidentified_offset():

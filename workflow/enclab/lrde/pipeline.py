@@ -15,7 +15,7 @@ With a truth channel (and ``settings["use_truth"]``, default True) the fit repor
 it uses that known motion centre; otherwise both are None with the reason.
 
 Settings keys (all optional): ``channel``, ``requantize``, ``use_truth``, ``rest_position``,
-``f_hz``, ``n_ensembles`` (4), ``n_walkers`` (32), ``n_steps`` (250), ``n_burn`` (150),
+``f_hz``, ``n_ensembles`` (4), ``n_walkers`` (32), ``n_steps`` (400), ``n_burn`` (400),
 ``ppc_draws`` (40).
 """
 from __future__ import annotations
@@ -137,8 +137,8 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict):
         t, counts, step, fit_seed,
         n_ensembles=int(settings.get("n_ensembles", 4)),
         n_walkers=int(settings.get("n_walkers", 32)),
-        n_steps=int(settings.get("n_steps", 250)),
-        n_burn=int(settings.get("n_burn", 150)),
+        n_steps=int(settings.get("n_steps", 400)),
+        n_burn=int(settings.get("n_burn", 400)),
         f_hz=f_hz,
         truth=truth if settings.get("use_truth", True) else None,
         rest_position=settings.get("rest_position"),

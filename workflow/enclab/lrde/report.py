@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["summary_block", "report_markdown"]
+__all__ = ["summary_block", "report_markdown", "batch_rows"]
 
 _NOT_CONVERGED = "NOT converged (R-hat > 1.01 or ESS < 1000)"
 
@@ -125,3 +125,32 @@ def report_markdown(block: dict, log_id: str | None = None) -> str:
               f"{diag['ess_min']:.0f}, max tau {diag['tau_max']:.1f} steps -> "
               f"{'converged' if diag['converged'] else _NOT_CONVERGED}."]
     return "\n".join(lines) + "\n"
+
+
+_BATCH_QUANTITIES = (("A12", "rad"), ("E_b", "rad"), ("a_eq", "rad"), ("offset_a", "rad"),
+                     ("bias_b", "rad"), ("f_hz", "Hz"), ("sigma", "rad"))
+
+
+def batch_rows(log_id: str, block: dict) -> list[dict]:
+    """One row per posterior quantity of an ``lrde`` block, for the batch table.
+
+    Every row repeats the log's identification and diagnostics so that a row read alone says
+    whether it can be trusted: ``log_id, quantity, unit, median, q05, q95, converged,
+    rhat_max, ess_min, n_cycles, steps_pp, step, dwell_formula_A12`` (the eq. 4 baseline, on
+    the ``A12`` row only) and ``reason`` (why ``offset_a``/``bias_b`` are missing, if they are).
+    """
+    diag = block["diagnostics"]
+    rows = []
+    for quantity, unit in _BATCH_QUANTITIES:
+        triple = block.get(quantity) or {}
+        rows.append({
+            "log_id": log_id, "quantity": quantity, "unit": unit,
+            "median": triple.get("median"), "q05": triple.get("q05"), "q95": triple.get("q95"),
+            "converged": diag["converged"], "rhat_max": diag["rhat_max"],
+            "ess_min": diag["ess_min"], "n_cycles": block["n_cycles"],
+            "steps_pp": block["steps_pp"], "step": block["step"],
+            "dwell_formula_A12": block["dwell_formula_A12"] if quantity == "A12" else None,
+            "reason": block["reason"] if quantity in ("offset_a", "bias_b") and not triple
+            else None,
+        })
+    return rows
