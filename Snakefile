@@ -1,0 +1,18 @@
+# enclab: logged encoder experiments -> quantization error (paper 000) and extreme low-resolution
+# encoder inference (paper 002). This file is wiring only; each stage is a rule file in
+# workflow/rules/ whose script (scripts/<rule>.py) calls the enclab package (workflow/enclab/).
+
+configfile: "config.yaml"
+
+
+include: "workflow/rules/common.smk"
+include: "workflow/rules/ingest.smk"
+include: "workflow/rules/quantization.smk"
+include: "workflow/rules/batch.smk"
+include: "workflow/rules/lrde.smk"
+
+
+rule all:
+    default_target: True
+    input:
+        all_targets(),

@@ -1,0 +1,100 @@
+# Shared helpers: configuration and manifest validation (before any job runs), the list of logs,
+# wildcard constraints and the code digest that makes library edits rerun affected jobs.
+import os
+import re
+
+from snakemake.logging import logger
+from snakemake.utils import validate
+
+import enclab
+from enclab import io as enclab_io
+from enclab.errors import EnclabInputError
+
+
+validate(config, schema="../schemas/config.schema.yaml")
+
+try:
+    DATA_ROOT, MANIFEST = enclab_io.read_manifest(config["manifest"], devices=config["devices"])
+except EnclabInputError as err:
+    raise WorkflowError(str(err)) from None
+
+ENTRIES = {entry["id"]: entry for entry in MANIFEST}
+if config.get("only_logs"):
+    unknown = sorted(set(config["only_logs"]) - set(ENTRIES))
+    if unknown:
+        raise WorkflowError(f"config key 'only_logs': unknown log id(s) {unknown}; known: {sorted(ENTRIES)}")
+    ENTRIES = {k: ENTRIES[k] for k in config["only_logs"]}
+
+
+def _stages(entry):
+    return (entry.get("analysis") or {}).get("stages", ["quantization"])
+
+
+LOG_IDS = sorted(ENTRIES)
+if config.get("batch_scope", "all") == "completed":
+    # Second pass after failures: keep the logs that produced a summary, name the others.
+    _failed = [i for i in LOG_IDS if not os.path.exists(f"results/{i}/summary.json")]
+    if _failed:
+        logger.warning(f"batch_scope=completed: leaving out {len(_failed)} log(s) without a "
+                       f"summary (see results/<log_id>/logs/): {', '.join(_failed)}")
+    LOG_IDS = [i for i in LOG_IDS if i not in _failed]
+QUANT_IDS = [i for i in LOG_IDS if "quantization" in _stages(ENTRIES[i])]
+LRDE_IDS = [i for i in LOG_IDS if "lrde" in _stages(ENTRIES[i])]
+CODE_DIGEST = enclab.code_digest()
+
+
+wildcard_constraints:
+    log_id="|".join(re.escape(i) for i in LOG_IDS) or "NO_LOGS",
+
+
+def raw_inputs(wildcards):
+    return enclab_io.entry_files(ENTRIES[wildcards.log_id], DATA_ROOT)
+
+
+def entry_of(wildcards):
+    return ENTRIES[wildcards.log_id]
+
+
+def device_of(wildcards):
+    device = ENTRIES[wildcards.log_id].get("device")
+    return config["devices"][device] if isinstance(device, str) else device
+
+
+def summary_inputs(wildcards):
+    """summary.json merges the blocks of the stages a log runs (quantization and/or lrde)."""
+    log_id = wildcards.log_id
+    inputs = {"canonical": f"results/{log_id}/canonical.parquet"}
+    if log_id in QUANT_IDS:
+        inputs.update(requantized=f"results/{log_id}/requantized.parquet",
+                      moments=f"results/{log_id}/moments.json",
+                      theory=f"results/{log_id}/theory.json")
+    if log_id in LRDE_IDS:
+        inputs["lrde"] = f"results/{log_id}/lrde/lrde.json"
+    return inputs
+
+
+def lrde_settings(wildcards):
+    """config["lrde"] updated with the log's own analysis.lrde block."""
+    settings = dict(config.get("lrde") or {})
+    settings.update((ENTRIES[wildcards.log_id].get("analysis") or {}).get("lrde") or {})
+    return settings
+
+
+def paper_figures_apply():
+    """Fig. 6/7 equivalents need the configured Fig. 7 repeat group on a device with x, y, z."""
+    group = config["figures"]["fig7_group"]
+    return any(ENTRIES[i].get("group") == group for i in QUANT_IDS)
+
+
+def all_targets():
+    targets = expand("results/{log_id}/summary.json", log_id=LOG_IDS)
+    targets += expand("results/{log_id}/figures/errors.png", log_id=QUANT_IDS)
+    targets += expand("results/{log_id}/lrde/report.md", log_id=LRDE_IDS)
+    if QUANT_IDS:
+        targets += ["results/batch/quantization.csv", "results/batch/pooled.csv",
+                    "results/figures/ratios.png"]
+    if paper_figures_apply():
+        targets += ["results/figures/fig6_position.png", "results/figures/fig7_derivatives.png"]
+    if LRDE_IDS:
+        targets += ["results/batch/lrde.csv"]
+    return targets

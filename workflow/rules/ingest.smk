@@ -1,0 +1,17 @@
+# Ingest: manifest entry -> canonical Parquet (t in s, channels in SI or int64 counts).
+
+
+rule ingest:
+    input:
+        raw_inputs,
+    output:
+        canonical="results/{log_id}/canonical.parquet",
+    params:
+        entry=entry_of,
+        data_root=DATA_ROOT,
+        devices=config["devices"],
+        code=CODE_DIGEST,
+    log:
+        "results/{log_id}/logs/ingest.log",
+    script:
+        "../../scripts/ingest.py"

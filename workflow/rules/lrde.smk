@@ -1,0 +1,36 @@
+# Paper 002 per log: dwell patterns and the emcee fit of stroke, bias and offset -> report.
+
+
+rule lrde_fit:
+    input:
+        canonical="results/{log_id}/canonical.parquet",
+    output:
+        block="results/{log_id}/lrde/lrde.json",
+        cycles="results/{log_id}/lrde/cycles.csv",
+        report=report("results/{log_id}/lrde/report.md", category="Paper 002",
+                      subcategory="{log_id}", caption="../report/lrde_report.rst"),
+        corner=report("results/{log_id}/lrde/corner.png", category="Paper 002",
+                      subcategory="{log_id}", caption="../report/lrde_corner.rst"),
+        dwell=report("results/{log_id}/lrde/dwell_ppc.png", category="Paper 002",
+                     subcategory="{log_id}", caption="../report/lrde_dwell.rst"),
+    params:
+        settings=lambda wc: lrde_settings(wc),
+        code=CODE_DIGEST,
+    threads: 1
+    log:
+        "results/{log_id}/logs/lrde_fit.log",
+    script:
+        "../../scripts/lrde_fit.py"
+
+
+rule batch_lrde:
+    input:
+        summaries=expand("results/{log_id}/summary.json", log_id=LRDE_IDS),
+    output:
+        table=report("results/batch/lrde.csv", category="Paper 002", caption="../report/lrde_batch.rst"),
+    params:
+        code=CODE_DIGEST,
+    log:
+        "results/batch/logs/batch_lrde.log",
+    script:
+        "../../scripts/batch_lrde.py"

@@ -1,0 +1,107 @@
+# Paper 000 per log: requantize -> kinematics -> derivatives / moments / theory -> summary.
+
+
+rule requantize:
+    input:
+        canonical="results/{log_id}/canonical.parquet",
+    output:
+        requantized="results/{log_id}/requantized.parquet",
+    params:
+        requantize=config["requantize"],
+        code=CODE_DIGEST,
+    log:
+        "results/{log_id}/logs/requantize.log",
+    script:
+        "../../scripts/requantize.py"
+
+
+rule kinematics:
+    input:
+        requantized="results/{log_id}/requantized.parquet",
+    output:
+        kinematics="results/{log_id}/kinematics.parquet",
+    params:
+        code=CODE_DIGEST,
+    log:
+        "results/{log_id}/logs/kinematics.log",
+    script:
+        "../../scripts/kinematics.py"
+
+
+rule derivatives:
+    input:
+        requantized="results/{log_id}/requantized.parquet",
+    output:
+        derivatives="results/{log_id}/derivatives.parquet",
+    params:
+        export=config["derivatives"]["export"],
+        code=CODE_DIGEST,
+    log:
+        "results/{log_id}/logs/derivatives.log",
+    script:
+        "../../scripts/derivatives.py"
+
+
+rule moments:
+    input:
+        requantized="results/{log_id}/requantized.parquet",
+        kinematics="results/{log_id}/kinematics.parquet",
+    output:
+        moments="results/{log_id}/moments.json",
+    params:
+        derivatives=config["derivatives"],
+        moments=config["moments"],
+        code=CODE_DIGEST,
+    log:
+        "results/{log_id}/logs/moments.log",
+    script:
+        "../../scripts/moments.py"
+
+
+rule theory:
+    input:
+        requantized="results/{log_id}/requantized.parquet",
+        kinematics="results/{log_id}/kinematics.parquet",
+    output:
+        theory="results/{log_id}/theory.json",
+    params:
+        derivatives=config["derivatives"],
+        code=CODE_DIGEST,
+    log:
+        "results/{log_id}/logs/theory.log",
+    script:
+        "../../scripts/theory.py"
+
+
+rule summary:
+    input:
+        unpack(summary_inputs),
+    output:
+        summary="results/{log_id}/summary.json",
+    params:
+        code=CODE_DIGEST,
+    log:
+        "results/{log_id}/logs/summary.log",
+    script:
+        "../../scripts/summary.py"
+
+
+rule log_figures:
+    input:
+        requantized="results/{log_id}/requantized.parquet",
+        kinematics="results/{log_id}/kinematics.parquet",
+        derivatives="results/{log_id}/derivatives.parquet",
+        summary="results/{log_id}/summary.json",
+    output:
+        errors=report("results/{log_id}/figures/errors.png", category="Per log",
+                      subcategory="{log_id}", caption="../report/log_errors.rst"),
+        comparison=report("results/{log_id}/figures/comparison.png", category="Per log",
+                          subcategory="{log_id}", caption="../report/log_comparison.rst"),
+    params:
+        export=config["derivatives"]["export"],
+        settle_tol=config["derivatives"]["settle_tol"],
+        code=CODE_DIGEST,
+    log:
+        "results/{log_id}/logs/log_figures.log",
+    script:
+        "../../scripts/log_figures.py"
