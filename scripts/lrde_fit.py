@@ -16,6 +16,7 @@ def main(smk):
     io.write_table(cycles, smk.output.cycles)
     io.save_figure(figures["corner"], smk.output.corner)
     io.save_figure(figures["dwell_ppc"], smk.output.dwell)
+    io.save_figure(figures["bias_cycles"], smk.output.bias_cycles)
     io.write_text(report_md, smk.output.report)
     io.write_json(block, smk.output.block)
 

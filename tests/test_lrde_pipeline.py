@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from matplotlib.figure import Figure
 
-from enclab.lrde import dwell, fit, pipeline, plots, report, simulate
+from enclab.lrde import dwell, fit, model, pipeline, plots, report, simulate
 
 STEP = simulate.ROS_DRILL_STEP
 FAST = {"n_ensembles": 2, "n_walkers": 16, "n_steps": 120, "n_burn": 80, "ppc_draws": 8}
@@ -38,7 +38,7 @@ def test_analyse_lrde_log_block_matches_design_contract():
     # The truth channel identifies the offset (to the truth's 0.01-step rounding).
     assert block["offset_a"]["median"] == pytest.approx(p["offset_a"], abs=0.02 * STEP)
     json.dumps(block)  # JSON-serialisable
-    assert set(figures) == {"corner", "dwell_ppc"}
+    assert set(figures) == {"corner", "dwell_ppc", "bias_cycles"}
     assert all(isinstance(f, Figure) for f in figures.values())
     assert "stroke A12" in md and "Sampler diagnostics" in md
     assert list(cycles.columns) == dwell.CYCLE_COLUMNS and len(cycles) >= 3
@@ -97,3 +97,43 @@ def test_figures_structure():
     cb = simulate.cycle_bias(cl_df["t"].to_numpy(), cl_df["theta"].to_numpy(), cl_p["f_hz"])
     np.testing.assert_allclose(dev_line.get_ydata(),
                                np.rad2deg(cb["bias"] - cl_p["ideal_bias"]))
+
+
+def test_truth_bias_deviation_matches_the_dwell_estimate_on_a_sinusoid():
+    df, p = simulate.open_loop_log(np.random.default_rng(3), A12=3.6 * STEP, bias=0.05 * STEP,
+                                   offset_frac=0.5, n_cycles=30)
+    t = df["t"].to_numpy()
+    theta = p["bias"] + 0.5 * p["A12"] * np.sin(2 * np.pi * p["f_hz"] * t + p["phase"])
+    truth = plots.truth_bias_deviation(t, theta, p["f_hz"], STEP, p["offset_a"], 0)
+    np.testing.assert_allclose(truth["E_b"], p["E_b"], atol=1e-12 * STEP)
+    # Independent method: the readings' dwell half-widths (eq. 4/14). A half-width is resolved
+    # to half a sample (0.25 ms at 2 kHz); the level crossing moves by A pi f sin(pi f w) dw
+    # ~ 1.8 step * 63 /s * 0.2 * 0.25 ms ~ 0.006 step, so E_b agrees to 0.01 step.
+    cycles = dwell.cycle_table(df["counts"].to_numpy(), t, STEP, f_hz=p["f_hz"])
+    sym = cycles[cycles["symmetric"] & (cycles["centre_count"] == 0)]
+    assert len(sym) >= 25
+    assert sym["E_b_dwell"].mean() == pytest.approx(p["E_b"], abs=0.01 * STEP)
+    fig = plots.bias_cycles_plot(cycles, STEP, truth)
+    top, bottom = fig.axes
+    labels = [line.get_label() for line in top.get_lines()]
+    assert "$E_b$ of the true angle (truth channel)" in labels
+    np.testing.assert_array_equal(bottom.get_lines()[0].get_ydata(), cycles["steps_pp"])
+    with pytest.raises(ValueError, match="lacks columns"):
+        plots.bias_cycles_plot(cycles.drop(columns="E_b_dwell"), STEP)
+
+
+def test_closed_loop_bias_stays_in_proposition_1_band():
+    """Paper 002 Fig. 6: in the PID loop the bias wanders about the ideal bias inside
+    +- epsilon/2 while the readings stay 2n steps peak to peak."""
+    cl_df, cl_p = simulate.closed_loop_pid_log(np.random.default_rng(4), n_cycles=40)
+    settled = cl_df[cl_df["t"] >= 0.5]
+    t, theta = settled["t"].to_numpy(), settled["theta"].to_numpy()
+    truth = plots.truth_bias_deviation(t, theta, cl_p["f_hz"], STEP, cl_p["offset_a"], 0)
+    per_period = simulate.cycle_bias(t, theta, cl_p["f_hz"])
+    np.testing.assert_allclose(truth["E_b"], per_period["bias"] - cl_p["ideal_bias"],
+                               atol=1e-15)
+    half_eps = 0.5 * np.asarray(model.epsilon(truth["A12"].to_numpy(), STEP))
+    assert np.all(np.abs(truth["E_b"]) < half_eps)
+    assert truth["E_b"].std() > 0.01 * STEP  # it wanders; it is not locked to the ideal bias
+    cycles = dwell.cycle_table(settled["counts"].to_numpy(), t, STEP, f_hz=cl_p["f_hz"])
+    assert set(cycles["steps_pp"]) == {4}

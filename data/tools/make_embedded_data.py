@@ -122,8 +122,8 @@ def lrde_entries(out_dir: Path, seed: int) -> list[dict]:
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seed", type=int, default=20261122)
-    parser.add_argument("--fig6-repeats", type=int, default=4,
-                        help="runs per Fig. 6 configuration other than zero (default 4)")
+    parser.add_argument("--fig6-repeats", type=int, default=8,
+                        help="runs per Fig. 6 configuration other than zero (default 8)")
     parser.add_argument("--fig7-repeats", type=int, default=20,
                         help="runs at the zero configuration, pooled for Fig. 7 (default 20)")
     parser.add_argument("--steps", type=float, nargs="+", default=[1e-3],

@@ -40,6 +40,21 @@ if config.get("batch_scope", "all") == "completed":
     LOG_IDS = [i for i in LOG_IDS if i not in _failed]
 QUANT_IDS = [i for i in LOG_IDS if "quantization" in _stages(ENTRIES[i])]
 LRDE_IDS = [i for i in LOG_IDS if "lrde" in _stages(ENTRIES[i])]
+
+
+def _first_of_groups(ids):
+    """Every ungrouped log and the first log of each repeat group (the per-log figures of the
+    other repeats look alike; ask for them by name: results/<log_id>/figures/errors.png)."""
+    seen, out = set(), []
+    for i in ids:
+        group = ENTRIES[i].get("group")
+        if group is None or group not in seen:
+            out.append(i)
+            seen.add(group)
+    return out
+
+
+FIGURE_IDS = _first_of_groups(QUANT_IDS)
 CODE_DIGEST = enclab.code_digest()
 
 
@@ -88,7 +103,7 @@ def paper_figures_apply():
 
 def all_targets():
     targets = expand("results/{log_id}/summary.json", log_id=LOG_IDS)
-    targets += expand("results/{log_id}/figures/errors.png", log_id=QUANT_IDS)
+    targets += expand("results/{log_id}/figures/errors.png", log_id=FIGURE_IDS)
     targets += expand("results/{log_id}/lrde/report.md", log_id=LRDE_IDS)
     if QUANT_IDS:
         targets += ["results/batch/quantization.csv", "results/batch/pooled.csv",

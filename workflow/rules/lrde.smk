@@ -13,6 +13,8 @@ rule lrde_fit:
                       subcategory="{log_id}", caption="../report/lrde_corner.rst"),
         dwell=report("results/{log_id}/lrde/dwell_ppc.png", category="Paper 002",
                      subcategory="{log_id}", caption="../report/lrde_dwell.rst"),
+        bias_cycles=report("results/{log_id}/lrde/bias_cycles.png", category="Paper 002",
+                           subcategory="{log_id}", caption="../report/lrde_bias_cycles.rst"),
     params:
         settings=lambda wc: lrde_settings(wc),
         code=CODE_DIGEST,

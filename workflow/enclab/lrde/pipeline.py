@@ -114,7 +114,7 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict):
         The ``lrde`` block of ``summary.json`` (:func:`enclab.lrde.report.summary_block`)
         plus ``channels`` (what was used).
     figures : dict of str to matplotlib.figure.Figure
-        ``"corner"`` and ``"dwell_ppc"``.
+        ``"corner"``, ``"dwell_ppc"`` and ``"bias_cycles"`` (paper 002 Fig. 6 from the log).
     report_md : str
     cycles : pandas.DataFrame
         :func:`enclab.lrde.dwell.cycle_table` of the measured counts.
@@ -147,7 +147,13 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict):
     block["channels"] = info
     predictive = plots.posterior_predictive_dwell(result, t, ppc_seed,
                                                   n_draws=int(settings.get("ppc_draws", 40)))
+    truth_periods = None
+    if truth is not None and block["offset_a"] is not None and block["centre_count"] is not None:
+        truth_periods = plots.truth_bias_deviation(
+            t, truth, block["f_hz"]["median"], step, block["offset_a"]["median"],
+            block["centre_count"])
     figures = {"corner": plots.corner_plot(result),
-               "dwell_ppc": plots.dwell_ppc_plot(cycles, predictive)}
+               "dwell_ppc": plots.dwell_ppc_plot(cycles, predictive),
+               "bias_cycles": plots.bias_cycles_plot(cycles, step, truth_periods)}
     report_md = report.report_markdown(block, meta.get("log_id"))
     return block, figures, report_md, cycles

@@ -18,7 +18,8 @@ from matplotlib.figure import Figure
 
 from enclab.lrde import dwell, model, simulate
 
-__all__ = ["corner_plot", "posterior_predictive_dwell", "dwell_ppc_plot", "closed_loop_plot"]
+__all__ = ["corner_plot", "posterior_predictive_dwell", "dwell_ppc_plot", "closed_loop_plot",
+           "bias_cycles_plot", "truth_bias_deviation"]
 
 _DEG = 180.0 / np.pi
 
@@ -146,4 +147,64 @@ def closed_loop_plot(df: pd.DataFrame, params: dict) -> Figure:
     ax_r.set_xlabel("time [s]")
     ax_r.set_ylabel("angle [deg]")
     ax_r.legend(fontsize=8)
+    return fig
+
+
+def truth_bias_deviation(t, truth, f_hz, step, offset_a, centre_count) -> pd.DataFrame:
+    """Per-period bias deviation ``E_b`` of the true angle, in the readings' frame.
+
+    ``E_b = bias + a - (c + 1/2) step`` (eq. 14 relative to the centre count ``c``: zero when
+    the motion is centred on the middle of reading ``c``), with ``bias`` and ``A12`` per period
+    from :func:`enclab.lrde.simulate.cycle_bias`. Columns ``t_mid, A12, bias, E_b``.
+    """
+    per_period = simulate.cycle_bias(t, truth, f_hz)
+    per_period["E_b"] = per_period["bias"] + offset_a - (centre_count + 0.5) * step
+    return per_period
+
+
+def bias_cycles_plot(cycles: pd.DataFrame, step: float, truth_periods: pd.DataFrame | None = None
+                     ) -> Figure:
+    """Paper 002 Fig. 6 from a log: per-cycle bias deviation in Proposition 1's band.
+
+    Top: ``E_b`` of every symmetric cycle from its dwell half-widths (eq. 4/14; readings only)
+    with the band ``+- epsilon/2`` of that cycle's stroke, and, when given, the true per-period
+    ``E_b`` (:func:`truth_bias_deviation`). Bottom: the readings' peak-to-peak step count per
+    cycle, which stays ``2n`` while the bias stays inside the band.
+
+    Parameters
+    ----------
+    cycles : pandas.DataFrame
+        :func:`enclab.lrde.dwell.cycle_table`.
+    step : float
+        Encoder step (rad).
+    truth_periods : pandas.DataFrame, optional
+        Columns ``t_mid`` and ``E_b`` (rad).
+    """
+    missing = {"t_start", "t_end", "symmetric", "A12_dwell", "E_b_dwell", "steps_pp"} - set(cycles)
+    if missing:
+        raise ValueError(f"cycles lacks columns {sorted(missing)}")
+    t_mid = 0.5 * (cycles["t_start"] + cycles["t_end"]).to_numpy()
+    sym = cycles["symmetric"].to_numpy(dtype=bool)
+    fig = Figure(figsize=(8, 6), layout="constrained")
+    ax_b, ax_n = fig.subplots(2, 1, sharex=True)
+    if sym.any():
+        half_eps = 0.5 * np.asarray(model.epsilon(cycles["A12_dwell"].to_numpy()[sym], step))
+        ax_b.plot(t_mid[sym], _DEG * cycles["E_b_dwell"].to_numpy()[sym], "o", ms=3,
+                  label=r"$E_b$ from the dwell half-widths (readings only)")
+        ax_b.plot(t_mid[sym], _DEG * half_eps, "k--", lw=0.8,
+                  label=r"$\pm\varepsilon/2$ (Proposition 1)")
+        ax_b.plot(t_mid[sym], -_DEG * half_eps, "k--", lw=0.8)
+    else:
+        ax_b.text(0.5, 0.5, "no symmetric 2n-step cycle: eq. (4) does not apply",
+                  transform=ax_b.transAxes, ha="center", va="center")
+    if truth_periods is not None:
+        ax_b.plot(truth_periods["t_mid"], _DEG * truth_periods["E_b"], "-", lw=1.0,
+                  color="C3", label=r"$E_b$ of the true angle (truth channel)")
+    ax_b.axhline(0.0, color="0.5", lw=0.8)
+    ax_b.set_ylabel("bias deviation $E_b$ [deg]")
+    ax_b.legend(fontsize=8)
+    ax_n.plot(t_mid, cycles["steps_pp"].to_numpy(), "o-", ms=3)
+    ax_n.set_ylabel("readings peak to peak [steps]")
+    ax_n.set_xlabel("time [s]")
+    ax_n.yaxis.get_major_locator().set_params(integer=True)
     return fig
