@@ -46,6 +46,7 @@ def test_every_entry_ingests_with_the_expected_size(logs):
     assert sizes == {
         "mrdlab_0p5hz": (19996, 19996),  # 19 994-19 998 per MRDLab file
         "encos_5hz": (6700, 6700),  # samples 600..7299 kept by the crop
+        "encos_5hz_lrde": (6700, 6700),  # the same file and crop
         "franka_excitation": (20544, 20544),  # 143 808 values / 7 joints
         "emps": (24841, 24841),
         "dcmotor_pr": (20000, 20000),
