@@ -18,7 +18,7 @@ second and the fraction of fits flagged converged.
 
 Usage::
 
-    python workflow/benchmarks/bench_lrde.py --draws 200 --cycles 1 5 20 100
+    python workflow/benchmarks/bench_lrde.py --draws 200 --cycles 1 5 20 100 --jobs 2
     python workflow/benchmarks/bench_lrde.py --draws 10 --cycles 20      # quick
 
 Writes ``<out>/lrde_draws.csv``, ``<out>/lrde_summary.csv`` and ``<out>/lrde_rmse.png``.
@@ -26,6 +26,7 @@ Writes ``<out>/lrde_draws.csv``, ``<out>/lrde_summary.csv`` and ``<out>/lrde_rms
 from __future__ import annotations
 
 import argparse
+import concurrent.futures
 import pathlib
 import time
 
@@ -38,7 +39,7 @@ from enclab.lrde import dwell, fit, model, simulate
 STEP = simulate.ROS_DRILL_STEP
 
 
-def one_draw(rng, n_cycles, fs_hz, f_nominal, noise_frac, fit_seed):
+def one_draw(rng, n_cycles, fs_hz, f_nominal, noise_frac, fit_seed, sampler):
     f_hz = f_nominal * rng.uniform(0.9, 1.1)
     a_frac = rng.uniform(0, 1)
     A12 = rng.uniform(3.0, 5.0) * STEP
@@ -71,7 +72,7 @@ def one_draw(rng, n_cycles, fs_hz, f_nominal, noise_frac, fit_seed):
                         "A12": 2 * STEP * np.hypot(coef[1], coef[2]),
                         "E_b": STEP * coef[0]})
     started = time.perf_counter()
-    r = fit.fit_sinusoid(t, c, STEP, seed=fit_seed)
+    r = fit.fit_sinusoid(t, c, STEP, seed=fit_seed, **sampler)
     wall = time.perf_counter() - started
     s = r.summary
     # E_b relative to count 0 (the truth's frame) = a_eq - step/2, whatever centre count the
@@ -125,6 +126,13 @@ def rmse_figure(summary: pd.DataFrame) -> Figure:
     return fig
 
 
+def _task(cycles, d, child, args, sampler):
+    sim_seed, fit_seed = child.spawn(2)
+    return [row | {"draw": d} for row in one_draw(np.random.default_rng(sim_seed), cycles,
+                                                   args.fs, args.f, args.noise, fit_seed,
+                                                   sampler)]
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--draws", type=int, default=200)
@@ -134,16 +142,27 @@ def main(argv=None):
     ap.add_argument("--f", type=float, default=20.0)
     ap.add_argument("--noise", type=float, default=0.005, help="position noise, steps")
     ap.add_argument("--out", default="results/benchmarks")
+    ap.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
+    ap.add_argument("--n-steps", type=int, default=400, help="as config.yaml lrde.n_steps")
+    ap.add_argument("--n-burn", type=int, default=400, help="as config.yaml lrde.n_burn")
     args = ap.parse_args(argv)
+    sampler = {"n_steps": args.n_steps, "n_burn": args.n_burn}
     root = np.random.SeedSequence(args.seed)
-    rows = []
+    tasks = []
     for cycles, ss in zip(args.cycles, root.spawn(len(args.cycles))):
         for d, child in enumerate(ss.spawn(args.draws)):
-            sim_seed, fit_seed = child.spawn(2)
-            for row in one_draw(np.random.default_rng(sim_seed), cycles, args.fs, args.f,
-                                args.noise, fit_seed):
-                rows.append(row | {"draw": d})
-            print(f"cycles={cycles} draw={d + 1}/{args.draws}", flush=True)
+            tasks.append((cycles, d, child))
+    rows = []
+    # Seeds are fixed per (cycles, draw) before any work starts, so the rows do not depend on
+    # --jobs; wall times do (two fits on two cores contend for memory bandwidth).
+    with concurrent.futures.ProcessPoolExecutor(max_workers=args.jobs) as pool:
+        futures = {pool.submit(_task, cycles, d, child, args, sampler): (cycles, d)
+                   for cycles, d, child in tasks}
+        for k, future in enumerate(concurrent.futures.as_completed(futures), start=1):
+            rows += future.result()
+            cycles, d = futures[future]
+            print(f"[{k}/{len(tasks)}] cycles={cycles} draw={d + 1}/{args.draws}", flush=True)
+    rows.sort(key=lambda r: (r["cycles"], r["draw"]))
     draws = pd.DataFrame(rows)
     summary = summarise(draws)
     out = pathlib.Path(args.out)
