@@ -7,6 +7,7 @@ def main(smk):
     req, meta = io.read_canonical(smk.input.requantized)
     kin, _ = io.read_canonical(smk.input.kinematics)
     p = smk.params
+    analysis.check_cutoffs(p.derivatives, meta)
     rows = analysis.empirical_rows(
         req, kin, meta, meta["levels"], analysis.filter_bank(p.derivatives),
         p.derivatives["architectures"], settle_tol=p.derivatives["settle_tol"],

@@ -39,6 +39,7 @@ from enclab import filters as flt
 from enclab import moments as mom
 from enclab import quantize as qz
 from enclab import theory as th
+from enclab.errors import EnclabInputError
 from enclab.kinematics import Device, make_device
 
 __all__ = [
@@ -48,6 +49,7 @@ __all__ = [
     "device_of",
     "kinematics_table",
     "filter_bank",
+    "check_cutoffs",
     "export_derivatives",
     "empirical_rows",
     "theory_rows",
@@ -295,6 +297,26 @@ def filter_bank(derivatives: Mapping) -> list[flt.DerivativeFilter]:
         for d in bank["d"] for n in bank["n"] for fc in bank["fc_hz"]
         for disc in bank["discretization"]
     ]
+
+
+def check_cutoffs(derivatives: Mapping, meta: Mapping) -> None:
+    """Every configured cutoff (bank and export) below this log's Nyquist frequency.
+
+    Raises
+    ------
+    EnclabInputError
+        Naming the configuration key, the cutoff and the log's sample rate.
+    """
+    fs = _fs(meta)
+    places = [("derivatives.bank.fc_hz", fc) for fc in derivatives["bank"]["fc_hz"]]
+    places += [(f"derivatives.export[{i}].fc_hz", spec["fc_hz"])
+               for i, spec in enumerate(derivatives.get("export") or [])]
+    for key, fc in places:
+        if float(fc) >= fs / 2:
+            raise EnclabInputError(
+                "configuration", f"cutoff {float(fc):g} Hz is at or above the Nyquist frequency "
+                f"{fs / 2:.6g} Hz of log '{meta.get('log_id')}' (sampled at {fs:.6g} Hz)", key=key,
+                expected="fc_hz < fs/2 for every log", hint="Lower the cutoff or leave the log out.")
 
 
 def _fs(meta: Mapping) -> float:

@@ -229,6 +229,37 @@ def _convert_channel(values: np.ndarray, channel: dict, raw, keep: np.ndarray) -
     return np.rint(si / step).astype(np.int64), {**meta, "storage": "counts", "step": step, "native_step": step}
 
 
+MAX_TURNS = 4
+
+
+def _check_plausible(stored: np.ndarray, meta: dict, channel: dict, raw) -> None:
+    """Reject a position channel that cannot be what the manifest says it is.
+
+    A truth or measured channel that never changes has no quantization error to analyse; an
+    angle channel spanning more than ``MAX_TURNS`` revolutions is far more often degrees (or
+    counts) declared as rad than a multi-turn axis, which the entry can declare
+    (``multi_turn: true``).
+    """
+    if channel["role"] not in ("truth", "measured"):
+        return
+    column = raw.columns[channel["name"]]
+    lo, hi = stored.min(), stored.max()
+    if lo == hi:
+        raise EnclabInputError(
+            raw.file, f"the {channel['role']} channel '{channel['name']}' never moves (all "
+            f"{stored.size} samples equal)", column=column,
+            expected="a joint that moves by at least one step",
+            hint="Use role: aux for a constant channel, or crop to the part of the log with motion.")
+    span = float(hi - lo) * (meta["step"] if meta["storage"] == "counts" else 1.0)
+    if meta["unit"] == "rad" and not channel["multi_turn"] and span > MAX_TURNS * 2 * math.pi:
+        raise EnclabInputError(
+            raw.file, f"channel '{channel['name']}' spans {span:.4g} rad = "
+            f"{span / (2 * math.pi):.3g} turns as {channel['unit']}", column=column,
+            expected=f"an angle within {MAX_TURNS} turns",
+            hint="If the values are degrees set unit: deg (counts: unit: counts with "
+            "counts_per_rev); if the axis really turns this far set multi_turn: true.")
+
+
 def canonicalize(raw, entry: dict, devices: dict) -> tuple[pd.DataFrame, dict]:
     """Convert a raw log to the canonical DataFrame and its metadata.
 
@@ -283,7 +314,7 @@ def canonicalize(raw, entry: dict, devices: dict) -> tuple[pd.DataFrame, dict]:
         i = int(backwards[0]) + 1
         located = {**raw.where(int(keep[i]), time=True)} if raw.time is not None else {}
         raise EnclabInputError(
-            problem=f"time goes backwards: {t[i]!r} s after {t[i - 1]!r} s",
+            problem=f"time goes backwards: {float(t[i]):.9g} s after {float(t[i - 1]):.9g} s",
             expected="non-decreasing time stamps", **located,
         )
     spec = entry["time"]
@@ -310,6 +341,7 @@ def canonicalize(raw, entry: dict, devices: dict) -> tuple[pd.DataFrame, dict]:
         values = raw.channels[channel["name"]][keep]
         require_finite(values, raw, raw.columns[channel["name"]], index=keep)
         stored, meta = _convert_channel(values, channel, raw, keep)
+        _check_plausible(stored, meta, channel, raw)
         columns[channel["name"]] = stored
         channel_meta.append(meta)
     df = pd.DataFrame(columns)

@@ -76,6 +76,7 @@ _CHANNEL_DEFAULTS = {
     "wrap_bits": None,
     "native_step": None,
     "detect_grid": None,
+    "multi_turn": False,
 }
 
 _LINEAR_UNITS = ("m", "mm")
@@ -115,6 +116,19 @@ def detect_grid_enabled(channel: dict) -> bool:
     return bool(channel["detect_grid"])
 
 
+def check_document(doc: Any, schema: dict, source: str, schema_name: str) -> None:
+    """Raise :class:`EnclabInputError` naming the dotted key of the first schema violation.
+
+    Used for the configuration before Snakemake's own validation (which fills defaults but
+    reports a violation without saying where it is).
+    """
+    validator = jsonschema.Draft202012Validator(schema)
+    error = jsonschema.exceptions.best_match(validator.iter_errors(doc))
+    if error is not None:
+        raise EnclabInputError(source, error.message, key=format_key(error.absolute_path),
+                               hint=f"See {schema_name} for the allowed keys and values.")
+
+
 def validate_manifest(doc: dict, devices: dict, source: str) -> tuple[str, list[dict]]:
     """Validate a parsed manifest, fill its defaults and check what the schema cannot.
 
@@ -148,15 +162,7 @@ def validate_manifest(doc: dict, devices: dict, source: str) -> tuple[str, list[
         raise EnclabInputError(
             source, f"the manifest is a {type(doc).__name__}", expected="a mapping with a 'logs' list"
         )
-    validator = jsonschema.Draft202012Validator(load_schema())
-    error = jsonschema.exceptions.best_match(validator.iter_errors(doc))
-    if error is not None:
-        raise EnclabInputError(
-            source,
-            error.message,
-            key=format_key(error.absolute_path),
-            hint="See workflow/schemas/manifest.schema.yaml for the allowed keys and values.",
-        )
+    check_document(doc, load_schema(), source, "workflow/schemas/manifest.schema.yaml")
     doc = copy.deepcopy(doc)
     data_root = doc.get("data_root", ".")
     entries = [_normalise_log(log) for log in doc["logs"]]

@@ -3,14 +3,24 @@
 import os
 import re
 
+import yaml
+
 from snakemake.logging import logger
 from snakemake.utils import validate
 
 import enclab
 from enclab import io as enclab_io
+from enclab import manifest as enclab_manifest
 from enclab.errors import EnclabInputError
 
 
+try:
+    # First for a message naming the key (Snakemake's validate does not), then to fill defaults.
+    enclab_manifest.check_document(
+        config, yaml.safe_load(open(os.path.join(workflow.basedir, "workflow/schemas/config.schema.yaml"))),
+        "configuration (config.yaml and --config)", "workflow/schemas/config.schema.yaml")
+except EnclabInputError as err:
+    raise WorkflowError(str(err)) from None
 validate(config, schema="../schemas/config.schema.yaml")
 
 try:
@@ -63,7 +73,10 @@ wildcard_constraints:
 
 
 def raw_inputs(wildcards):
-    return enclab_io.entry_files(ENTRIES[wildcards.log_id], DATA_ROOT)
+    # A missing file is left out so that ingest runs and fails for this log alone with a
+    # clear message (a missing input would stop Snakemake from building the whole DAG).
+    files = enclab_io.entry_files(ENTRIES[wildcards.log_id], DATA_ROOT)
+    return [f for f in files if os.path.exists(f)]
 
 
 def entry_of(wildcards):

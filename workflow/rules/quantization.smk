@@ -35,6 +35,7 @@ rule derivatives:
         derivatives="results/{log_id}/derivatives.parquet",
     params:
         export=config["derivatives"]["export"],
+        derivatives=config["derivatives"],
         code=CODE_DIGEST,
     log:
         "results/{log_id}/logs/derivatives.log",

@@ -1,0 +1,154 @@
+"""Run the bad-input corpus (tests/corpus/cases.py) through the real Snakemake workflow.
+
+``run_corpus(work)`` builds every case under ``work``, runs the workflow once over all log
+cases (plus a clean control log) with ``--keep-going``, once per broken manifest or config
+(those must stop before any job), and returns one :class:`Outcome` per case with the message
+the user got. Input checksums are taken before and compared after everything ran.
+"""
+from __future__ import annotations
+
+import copy
+import hashlib
+import os
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import yaml
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from cases import CASES, Case, good_entry, good_table, write_csv  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[2]
+SNAKEMAKE = Path(sys.executable).with_name("snakemake")
+SMALL_BANK = {"d": [1, 2], "n": [1, 2], "fc_hz": [50, 100], "discretization": ["exponential"]}
+
+
+@dataclass
+class Outcome:
+    case: Case
+    message: str  # the one-line error the user got, or "" when the log completed
+    completed: bool  # the log produced a summary.json (log cases) / the run passed (others)
+    leftovers: list[str]  # outputs of a failed log that should not exist
+    report: dict | None  # time_report of a completed log
+
+    @property
+    def passed(self) -> bool:
+        if self.case.expect is None:
+            wanted = self.case.extra.get("report", {})
+            return self.completed and all(self.report.get(k) == v for k, v in wanted.items())
+        return (not self.completed and not self.leftovers
+                and all(f in self.message for f in self.case.expect))
+
+
+def _config(manifest: str, changes: dict | None = None) -> dict:
+    config = yaml.safe_load((ROOT / "config.yaml").read_text())
+    config["manifest"] = manifest
+    config["derivatives"]["bank"] = dict(SMALL_BANK)
+    config["derivatives"]["export"] = [{"d": 1, "n": 1, "fc_hz": 50, "discretization": "exponential"}]
+    config["figures"]["fig7_group"] = "none"
+    for dotted, value in (changes or {}).items():
+        target = config
+        *path, last = dotted.split(".")
+        for key in path:
+            target = target[key]
+        target[last] = value
+    return config
+
+
+def _snakemake(work: Path, config: dict, *extra: str) -> subprocess.CompletedProcess:
+    (work / "config.yaml").write_text(yaml.safe_dump(config))
+    command = [str(SNAKEMAKE), "--snakefile", str(ROOT / "Snakefile"), "--directory", str(work),
+               "--configfile", str(work / "config.yaml"), "--cores", "2", "--keep-going", *extra]
+    return subprocess.run(command, cwd=work, capture_output=True, text=True, timeout=1200,
+                          env=dict(os.environ, MPLBACKEND="Agg"))
+
+
+def _error_line(text: str) -> str:
+    """The enclab error line of a rule log or of snakemake's output (first match)."""
+    for line in text.splitlines():
+        if " ERROR " in line:
+            return line.split(" ERROR ", 1)[1].strip()
+    for line in text.splitlines():
+        if ("expected" in line or "Error" in line) and ":" in line:
+            return line.strip()
+    return ""
+
+
+def checksums(folder: Path) -> dict[str, str]:
+    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+STAGE_OUTPUTS = {"ingest": "canonical.parquet", "requantize": "requantized.parquet",
+                 "kinematics": "kinematics.parquet", "derivatives": "derivatives.parquet",
+                 "moments": "moments.json", "theory": "theory.json"}
+
+
+def _log_outcome(work: Path, case: Case) -> Outcome:
+    results = work / "results" / case.name
+    summary = results / "summary.json"
+    stage = case.stage or "ingest"
+    log = results / "logs" / f"{stage}.log"
+    message = _error_line(log.read_text()) if log.exists() else ""
+    if summary.exists():
+        report = yaml.safe_load(summary.read_text()).get("time_report")
+        return Outcome(case, message, True, [], report)
+    # Outputs of the stages before the failing one are complete results and stay; the failing
+    # stage's own output (and everything after it) must not exist.
+    names = list(STAGE_OUTPUTS)
+    failing = names[names.index(stage):] if stage in names else []
+    leftovers = [STAGE_OUTPUTS[n] for n in failing if (results / STAGE_OUTPUTS[n]).exists()]
+    return Outcome(case, message, False, leftovers, None)
+
+
+def run_corpus(work: Path) -> tuple[list[Outcome], bool]:
+    """Build and run every case under ``work``; return the outcomes and whether the inputs'
+    checksums are unchanged after all runs."""
+    data = work / "logs"
+    data.mkdir(parents=True, exist_ok=True)
+    log_cases = [c for c in CASES if c.scope == "log"]
+    entries = [c.build(data, c.name) for c in log_cases]
+    write_csv(good_table(), data / "control.csv")
+    entries.append(good_entry("control", "control.csv"))
+    up_front, per_log_config = [], []
+    for case in CASES:
+        if case.scope == "log":
+            continue
+        built = case.build(data, case.name)
+        (up_front if case.up_front else per_log_config).append((case, built))
+    before = checksums(data)
+    outcomes = []
+
+    (work / "manifest.yaml").write_text(yaml.safe_dump({"data_root": "logs", "logs": entries}))
+    _snakemake(work, _config("manifest.yaml"))
+    outcomes += [_log_outcome(work, c) for c in log_cases]
+
+    for case, built in up_front:
+        sub = work / "up_front" / case.name
+        sub.mkdir(parents=True, exist_ok=True)
+        os.symlink(data, sub / "logs")
+        if case.scope == "manifest":
+            logs = [built, copy.deepcopy(built)] if case.extra.get("duplicate") else [built]
+            (sub / "manifest.yaml").write_text(yaml.safe_dump({"data_root": "logs", "logs": logs}))
+            config = _config("manifest.yaml")
+        else:
+            (sub / "manifest.yaml").write_text(yaml.safe_dump(
+                {"data_root": "logs", "logs": [good_entry("control", "control.csv")]}))
+            config = _config("manifest.yaml", built)
+        proc = _snakemake(sub, config, "--dry-run")
+        text = proc.stdout + proc.stderr
+        message = next((line.strip() for line in text.splitlines()
+                        if any(f in line for f in case.expect)), _error_line(text))
+        outcomes.append(Outcome(case, message, proc.returncode == 0, [], None))
+
+    for case, built in per_log_config:
+        sub = work / "per_log" / case.name
+        sub.mkdir(parents=True, exist_ok=True)
+        os.symlink(data, sub / "logs")
+        (sub / "manifest.yaml").write_text(yaml.safe_dump(
+            {"data_root": "logs", "logs": [good_entry(case.name, "control.csv")]}))
+        _snakemake(sub, _config("manifest.yaml", built))
+        outcomes.append(_log_outcome(sub, case))
+    return outcomes, checksums(data) == before
