@@ -20,12 +20,16 @@ Settings keys (all optional): ``channel``, ``requantize``, ``use_truth``, ``rest
 """
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 import pandas as pd
 
 from enclab.lrde import dwell, fit, plots, report
 
 __all__ = ["select_channels", "analyse_lrde_log"]
+
+_log = logging.getLogger(__name__)
 
 _KNOWN_SETTINGS = {"channel", "requantize", "use_truth", "rest_position", "f_hz", "n_ensembles",
                    "n_walkers", "n_steps", "n_burn", "ppc_draws"}
@@ -143,6 +147,8 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict):
         truth=truth if settings.get("use_truth", True) else None,
         rest_position=settings.get("rest_position"),
     )
+    # The wall time goes to the log, not the block: summary.json must be byte-reproducible.
+    _log.info("emcee fit: %.1f s wall, acceptance %.2f", result.wall_time_s, result.acceptance)
     block = report.summary_block(result, summary)
     block["channels"] = info
     predictive = plots.posterior_predictive_dwell(result, t, ppc_seed,

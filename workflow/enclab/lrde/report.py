@@ -79,7 +79,7 @@ def summary_block(fit, dwell: dict) -> dict:
             "prop2_sign_agreement": _num(dwell.get("prop2_sign_agreement")),
         },
         "sampler": {k: v for k, v in fit.settings.items() if k != "bounds_internal"}
-        | {"acceptance": _num(fit.acceptance), "wall_time_s": _num(fit.wall_time_s)},
+        | {"acceptance": _num(fit.acceptance)},
     }
     return block
 
