@@ -348,7 +348,8 @@ def _attach_time_file(raw: RawLog, path: Path) -> None:
                 header_seen = True  # a single-column CSV's header line
                 continue
             raise EnclabInputError(display, f"text '{fields[0]}' in a numeric column", row=number,
-                                   row_label="line", expected="a number") from None
+                                   row_label="line", expected="a number",
+                                   hint="Fix the line, or crop the log to exclude it.") from None
         locations.append(number)
     time = np.asarray(values, dtype=np.float64)
     if time.size != raw.n_samples + raw.trailing_empty_dropped and time.size != raw.n_samples:
@@ -398,6 +399,7 @@ def _parse_numbers(fields: list[str], column_label: str, locations: np.ndarray, 
             raise EnclabInputError(
                 display, f"text '{text}' in a numeric column", column=column_label,
                 row=int(locations[i]), row_label=row_label, expected="a number",
+                hint="Fix the value, or crop the log to exclude it (crop: t_start/t_end).",
             ) from None
     return out
 
@@ -422,11 +424,14 @@ def _read_delimited(path: Path, display: str, fmt: str, reader: dict) -> _Table:
     if header is not None:
         if header >= len(content):
             raise EnclabInputError(display, f"no header line (reader.header = {header})",
-                                   expected="a header line")
+                                   expected="a header line",
+                                   hint="The file is empty or shorter than expected: check that "
+                                   "the logger finished writing it, or set reader.header.")
         header_number, header_text = content[header]
         content = content[header + 1:]
     if not content:
-        raise EnclabInputError(display, "no data lines", expected="at least two samples")
+        raise EnclabInputError(display, "no data lines", expected="at least two samples",
+                               hint="Check that the logger finished writing the file.")
     delimiter = reader.get("delimiter", "auto")
     if delimiter == "auto":
         delimiter = "," if "," in content[0][1] else "whitespace"
@@ -510,7 +515,10 @@ def _read_parquet(path: Path, display: str) -> _Table:
     try:
         table = pq.read_table(path)
     except (pa.ArrowException, OSError) as exc:
-        raise EnclabInputError(display, f"not a readable Parquet file ({exc})") from None
+        raise EnclabInputError(display, f"not a readable Parquet file ({exc})",
+                               expected="a complete Parquet file",
+                               hint="Copy or export the file again; check format in the "
+                               "manifest.") from None
     names = list(table.column_names)
     rows = np.arange(1, table.num_rows + 1, dtype=np.int64)
 
