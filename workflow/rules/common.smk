@@ -14,11 +14,12 @@ from enclab import manifest as enclab_manifest
 from enclab.errors import EnclabInputError
 
 
+with open(os.path.join(workflow.basedir, "workflow/schemas/config.schema.yaml")) as handle:
+    CONFIG_SCHEMA = yaml.safe_load(handle)
 try:
     # First for a message naming the key (Snakemake's validate does not), then to fill defaults.
-    enclab_manifest.check_document(
-        config, yaml.safe_load(open(os.path.join(workflow.basedir, "workflow/schemas/config.schema.yaml"))),
-        "configuration (config.yaml and --config)", "workflow/schemas/config.schema.yaml")
+    enclab_manifest.check_document(config, CONFIG_SCHEMA, "configuration (config.yaml and --config)",
+                                   "workflow/schemas/config.schema.yaml")
 except EnclabInputError as err:
     raise WorkflowError(str(err)) from None
 validate(config, schema="../schemas/config.schema.yaml")
