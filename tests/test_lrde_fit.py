@@ -80,6 +80,18 @@ def test_fit_validates():
         fit.fit_sinusoid(t, np.zeros(100, dtype=np.int64), STEP, seed=0)
 
 
+def test_sigma_range_bounds_the_jitter_posterior():
+    df, p = _log(13, n_cycles=4)
+    t, c = df["t"].to_numpy(), df["counts"].to_numpy()
+    kwargs = dict(SMALL, n_steps=100, n_burn=60)
+    r = fit.fit_sinusoid(t, c, STEP, seed=2, sigma_range=(0.01, 0.02), **kwargs)
+    sigma_steps = r.samples[:, 4] / STEP
+    assert sigma_steps.min() > 0.01 and sigma_steps.max() < 0.02
+    for bad in [(0.02, 0.01), (0.0, 0.1), (-1.0, 0.1)]:
+        with pytest.raises(ValueError, match="sigma_range"):
+            fit.fit_sinusoid(t, c, STEP, seed=2, sigma_range=bad, **kwargs)
+
+
 @pytest.mark.slow
 def test_posterior_intervals_are_calibrated_on_simulated_draws():
     # 40 independent draws (a ~ U(0, step), A12 ~ U(3, 5) step, E_b inside Prop. 1's band),

@@ -153,8 +153,12 @@ def main(argv=None):
     ap.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
     ap.add_argument("--n-steps", type=int, default=400, help="as config.yaml lrde.n_steps")
     ap.add_argument("--n-burn", type=int, default=400, help="as config.yaml lrde.n_burn")
+    ap.add_argument("--sigma-range", type=float, nargs=2, default=None, metavar=("LO", "HI"),
+                    help="jitter prior range in steps (default: the fit's open range)")
     args = ap.parse_args(argv)
     sampler = {"n_steps": args.n_steps, "n_burn": args.n_burn}
+    if args.sigma_range is not None:
+        sampler["sigma_range"] = tuple(args.sigma_range)
     root = np.random.SeedSequence(args.seed)
     tasks = []
     for cycles, ss in zip(args.cycles, root.spawn(len(args.cycles))):

@@ -263,7 +263,7 @@ def _check_int_counts(counts, n):
 
 
 def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250, n_burn=150,
-                 f_hz=None, truth=None, rest_position=None) -> FitResult:
+                 f_hz=None, truth=None, rest_position=None, sigma_range=None) -> FitResult:
     """Posterior of stroke, bias deviation, frequency, phase and noise from coarse counts.
 
     Parameters
@@ -290,6 +290,12 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
         The motion centre ``b`` in the encoder's frame when it is known by construction (e.g.
         0 when the drive oscillates about the angle where the counter was zeroed); gives
         ``a = a_eq - rest_position``. Ignored when ``truth`` is given.
+    sigma_range : (float, float), optional
+        Prior range of the position jitter ``sigma`` in steps (log-uniform inside), default
+        ``(1e-4, 10**-0.5)``. Give the range a lab knows for its encoder: with small jitter
+        the readings rarely show it, and an open range lets ``sigma`` collapse far below the
+        truth, which narrows the intervals of ``A12`` and ``E_b`` too much
+        (workflow/benchmarks/bench_lrde.py ``--sigma-range``).
 
     Returns
     -------
@@ -317,6 +323,13 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
     else:
         root = np.random.SeedSequence(seed)
     started = time.perf_counter()
+    if sigma_range is None:
+        log_sigma_bounds = _LOG_SIGMA_BOUNDS
+    else:
+        lo, hi = (float(v) for v in sigma_range)
+        if not (0 < lo < hi and np.isfinite(hi)):
+            raise ValueError(f"sigma_range must be (lo, hi) steps with 0 < lo < hi, got {sigma_range!r}")
+        log_sigma_bounds = (np.log10(lo), np.log10(hi))
     init = initial_guess(t, counts, step, f_hz=f_hz)
     K = init["steps_pp"]
     bounds = np.array([
@@ -324,12 +337,15 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
         [-1.0, 1.0],
         [0.8 * init["f_hz"], 1.25 * init["f_hz"]],
         [init["phase"] - np.pi, init["phase"] + np.pi],
-        list(_LOG_SIGMA_BOUNDS),
+        list(log_sigma_bounds),
     ])
     centre = init["centre_count"]
     t_ref = init["t_ref"]
+    log_sigma0 = np.log10(init["sigma"] / step)
+    if not log_sigma_bounds[0] < log_sigma0 < log_sigma_bounds[1]:
+        log_sigma0 = 0.5 * (log_sigma_bounds[0] + log_sigma_bounds[1])
     x0 = np.array([init["A12"] / step, init["E_b"] / step, init["f_hz"], init["phase"],
-                   np.log10(init["sigma"] / step)])
+                   log_sigma0])
     # Dispersion of the start: a few tenths of the expected posterior widths, so that
     # independent ensembles start apart and R-hat can detect non-mixing.
     duration = t[-1] - t[0]

@@ -16,7 +16,8 @@ it uses that known motion centre; otherwise both are None with the reason.
 
 Settings keys (all optional): ``channel``, ``requantize``, ``use_truth``, ``rest_position``,
 ``f_hz``, ``n_ensembles`` (4), ``n_walkers`` (32), ``n_steps`` (400), ``n_burn`` (400),
-``ppc_draws`` (40).
+``ppc_draws`` (40), ``sigma_range_steps`` (prior range of the jitter in steps, see
+:func:`enclab.lrde.fit.fit_sinusoid`).
 """
 from __future__ import annotations
 
@@ -32,7 +33,7 @@ __all__ = ["select_channels", "analyse_lrde_log"]
 _log = logging.getLogger(__name__)
 
 _KNOWN_SETTINGS = {"channel", "requantize", "use_truth", "rest_position", "f_hz", "n_ensembles",
-                   "n_walkers", "n_steps", "n_burn", "ppc_draws"}
+                   "n_walkers", "n_steps", "n_burn", "ppc_draws", "sigma_range_steps"}
 
 
 def _angle(df: pd.DataFrame, channel: dict) -> np.ndarray:
@@ -146,6 +147,7 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict):
         f_hz=f_hz,
         truth=truth if settings.get("use_truth", True) else None,
         rest_position=settings.get("rest_position"),
+        sigma_range=settings.get("sigma_range_steps"),
     )
     # The wall time goes to the log, not the block: summary.json must be byte-reproducible.
     _log.info("emcee fit: %.1f s wall, acceptance %.2f", result.wall_time_s, result.acceptance)
