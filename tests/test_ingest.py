@@ -340,3 +340,22 @@ def test_ingest_csv_fixture_in_every_unit():
     np.testing.assert_allclose(df["enc"] * meta["channels"][2]["step"], theta, rtol=1e-15)
     np.testing.assert_allclose(df["x"], 0.5e-3 * COUNTS, rtol=1e-15)
     np.testing.assert_allclose(df["t"], np.arange(N) / 100, rtol=1e-15)
+
+
+# ----------------------------------------------------------------------------- plausibility
+def test_a_truth_channel_that_never_moves_is_rejected_but_an_aux_one_is_kept():
+    with pytest.raises(EnclabInputError, match=r"column 'col_q'.*never moves \(all 5 samples"):
+        convert({"q": [0.3] * 5}, q={"role": "truth", "joint": 1, "unit": "rad", "detect_grid": False})
+    df, _ = convert({"q": [0.3] * 5}, q={"role": "aux", "unit": "rad"})
+    assert df["q"].tolist() == [0.3] * 5
+
+
+def test_degrees_declared_as_radians_are_rejected_unless_multi_turn():
+    degrees = np.linspace(-90.0, 90.0, 50)  # 180 "rad" = 28.6 turns
+    spec = {"role": "truth", "joint": 1, "unit": "rad", "detect_grid": False}
+    with pytest.raises(EnclabInputError, match=r"spans 180 rad = 28.6 turns.*set unit: deg"):
+        convert({"q": degrees}, q=spec)
+    df, _ = convert({"q": degrees}, q=spec | {"multi_turn": True})
+    np.testing.assert_array_equal(df["q"], degrees)
+    df, _ = convert({"q": degrees}, q=spec | {"unit": "deg"})
+    np.testing.assert_allclose(df["q"], np.deg2rad(degrees))

@@ -292,7 +292,8 @@ def canonicalize(raw, entry: dict, devices: dict) -> tuple[pd.DataFrame, dict]:
     EnclabInputError
         Time going backwards (naming the row), fewer than two samples after the crop, a median
         rate more than 5 % off ``nominal_rate_hz``, non-integer counts, values off a declared
-        grid, or an unknown device name.
+        grid, a truth/measured channel that never moves or an angle channel spanning more than
+        ``MAX_TURNS`` turns without ``multi_turn``, or an unknown device name.
     """
     t_all, synthetic_rate = _time_base(raw, entry)
     keep = np.arange(raw.n_samples)
