@@ -384,10 +384,8 @@ def _split_function(delimiter: str):
 def _parse_numbers(fields: list[str], column_label: str, locations: np.ndarray, row_label: str,
                    display: str) -> np.ndarray:
     """float64 array of text fields; empty fields become NaN, other text is an error."""
-    try:
+    with contextlib.suppress(ValueError):  # fast path; the loop below locates the bad field
         return np.array(fields, dtype=np.float64)
-    except ValueError:
-        pass
     out = np.empty(len(fields), dtype=np.float64)
     for i, text in enumerate(fields):
         if text == "":
