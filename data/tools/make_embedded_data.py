@@ -30,8 +30,8 @@ TRUTH_STEP = 1.25e-4
 # uniformly over one 1 mrad step matters: with a grid-aligned centre every run turns around at
 # the same place on the grid, the dwell at the turning points is the same in every run, and the
 # derivative-noise std of every run is about 1.5 % below the grid-offset average the exact model
-# predicts (workflow/benchmarks/grid_alignment.py, 40 runs, d1 n1 fc200: 0.9825 +- 0.0004 aligned,
-# 0.9989 +- 0.0019 random).
+# predicts (workflow/benchmarks/grid_alignment.py, 40 runs, d1 n1 fc200: 0.9825 +- 0.0003 aligned,
+# 0.9992 +- 0.0016 random).
 CENTRE_JITTER = 1e-3
 
 

@@ -30,10 +30,14 @@ TRUTH_STEP = 1.25e-4
 RATIO = 8
 
 
-def one_run(seed_seq, bank) -> list[dict]:
-    rng = np.random.default_rng(seed_seq)
+def filter_ratios(rng: np.random.Generator, bank, jitter: bool = True) -> list[dict]:
+    """One simulated run: measured/exact and measured/PQN std of every filter's error.
+
+    The centre is uniform over one coarse step (``jitter``) or exactly on a grid point.
+    """
     t = np.arange(int(15 * FS)) / FS
-    theta = rng.uniform(-0.5e-3, 0.5e-3) + np.deg2rad(3.0) * np.sin(
+    centre = rng.uniform(-0.5e-3, 0.5e-3) if jitter else 0.0
+    theta = centre + np.deg2rad(3.0) * np.sin(
         2 * np.pi * rng.uniform(4.9, 5.1) * t + rng.uniform(0, 2 * np.pi))
     fine = quantize.quantize(theta, TRUTH_STEP)
     coarse = quantize.requantize_counts(fine, RATIO)
@@ -45,11 +49,15 @@ def one_run(seed_seq, bank) -> list[dict]:
         settle = filters.settle_samples(filt, FS)
         measured = np.std(filters.apply(filt, err, FS)[settle:])
         h = filters.impulse_response(filt, FS)
-        rows.append({"filter": filt.label, "d": filt.d, "n": filt.n, "fc_hz": filt.fc_hz,
+        rows.append({"filter": filt.label(), "d": filt.d, "n": filt.n, "fc_hz": filt.fc_hz,
                      "discretization": filt.discretization,
                      "ratio_exact": measured / theory.exact_std_joint(truth, model, h),
                      "ratio_pqn": measured / float(theory.pqn_derivative_std_joint(h, RATIO * TRUTH_STEP)[0])})
     return rows
+
+
+def one_run(seed_seq, bank) -> list[dict]:
+    return filter_ratios(np.random.default_rng(seed_seq), bank)
 
 
 def main(argv=None) -> None:

@@ -22,32 +22,15 @@ import argparse
 
 import numpy as np
 
-from enclab import filters, quantize, theory
+from enclab import filters
+from exact_model_precision import filter_ratios  # same folder: run as a script
 
-FS = 1000.0
-TRUTH_STEP = 1.25e-4
-RATIO = 8
 FILTERS = [filters.DerivativeFilter(1, 1, 200.0), filters.DerivativeFilter(1, 1, 50.0),
            filters.DerivativeFilter(2, 2, 50.0)]
 
 
 def one_run(rng: np.random.Generator, jitter: bool) -> list[float]:
-    t = np.arange(int(15 * FS)) / FS
-    f = rng.uniform(4.9, 5.1)
-    centre = rng.uniform(-0.5e-3, 0.5e-3) if jitter else 0.0
-    theta = centre + np.deg2rad(3.0) * np.sin(2 * np.pi * f * t + rng.uniform(0, 2 * np.pi))
-    fine = quantize.quantize(theta, TRUTH_STEP)
-    coarse = quantize.requantize_counts(fine, RATIO)
-    err = coarse * (RATIO * TRUTH_STEP) - fine * TRUTH_STEP
-    truth = fine * TRUTH_STEP
-    model = theory.QuantizerErrorModel(RATIO * TRUTH_STEP, 0.5, truth_step=TRUTH_STEP)
-    ratios = []
-    for filt in FILTERS:
-        settle = filters.settle_samples(filt, FS)
-        measured = np.std(filters.apply(filt, err, FS)[settle:])
-        h = filters.impulse_response(filt, FS)
-        ratios.append(measured / theory.exact_std_joint(truth, model, h))
-    return ratios
+    return [row["ratio_exact"] for row in filter_ratios(rng, FILTERS, jitter)]
 
 
 def main(argv=None) -> None:
@@ -56,7 +39,7 @@ def main(argv=None) -> None:
     parser.add_argument("--seed", type=int, default=20261122)
     args = parser.parse_args(argv)
     print(f"{args.runs} runs per arm; measured std / exact-model std of the filtered error")
-    print(f"{'centre':>8} " + " ".join(f"{f.label:>22}" for f in FILTERS))
+    print(f"{'centre':>8} " + " ".join(f"{f.label():>22}" for f in FILTERS))
     for jitter in (False, True):
         rng = np.random.default_rng(args.seed)
         r = np.array([one_run(rng, jitter) for _ in range(args.runs)])
