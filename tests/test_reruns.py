@@ -8,34 +8,22 @@ import hashlib
 import os
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 
 from enclab import io
 from enclab.lrde import simulate as lrde_sim
 from enclab.simulate import phantom_protocol_run
+from workspace import lrde_entry, phantom_entry, snakemake_command, write_workspace
 
 pytestmark = pytest.mark.slow
 
-ROOT = Path(__file__).resolve().parents[1]
-SNAKEMAKE = Path(sys.executable).with_name("snakemake")
 # Images carry no timestamps (save_figure strips them) but are compared only for existence:
 # byte-identity of PNGs across matplotlib builds is not a contract.
 COMPARED = {".json", ".csv", ".parquet", ".md"}
-
-
-def _phantom_entry(name):
-    return {"id": name, "file": f"{name}.parquet", "format": "parquet",
-            "device": "phantom_premium_1_5", "group": "g",
-            "time": {"column": "t", "unit": "s", "nominal_rate_hz": 1000.0},
-            "channels": [{"name": f"theta{j}", "column": f"theta{j}_counts", "role": "truth",
-                          "joint": j, "unit": "counts", "step": 1.25e-4} for j in (1, 2, 3)],
-            "analysis": {"requantize": {"steps": [1e-3]}}}
 
 
 def _workspace(path: Path) -> Path:
@@ -45,36 +33,18 @@ def _workspace(path: Path) -> Path:
     for k in (1, 2):
         log, _ = phantom_protocol_run(np.zeros(3), np.random.default_rng(k), duration_s=3.0)
         io.write_table(log, data / f"run{k}.parquet")
-        entries.append(_phantom_entry(f"run{k}"))
+        entries.append(phantom_entry(f"run{k}", f"run{k}.parquet", "g"))
     step = lrde_sim.ROS_DRILL_STEP
     log, _ = lrde_sim.open_loop_log(np.random.default_rng(9), n_cycles=6, noise_std=0.01 * step,
                                     truth_step=step / 100)
     io.write_table(log, data / "lrde.parquet")
-    entries.append({"id": "lrde", "file": "lrde.parquet", "format": "parquet",
-                    "device": "lrde_axis", "time": {"column": "t", "unit": "s"},
-                    "channels": [{"name": "coarse", "column": "counts", "role": "measured",
-                                  "joint": 1, "unit": "counts", "step": step},
-                                 {"name": "fine", "column": "truth_counts", "role": "truth",
-                                  "joint": 1, "unit": "counts", "step": step / 100}],
-                    "analysis": {"stages": ["lrde"]}})
-    (path / "manifest.yaml").write_text(yaml.safe_dump({"data_root": "logs", "logs": entries}))
-    config = yaml.safe_load((ROOT / "config.yaml").read_text())
-    config["manifest"] = "manifest.yaml"
-    config["derivatives"]["bank"] = {"d": [1, 2], "n": [1, 2], "fc_hz": [50, 100],
-                                     "discretization": ["exponential", "bilinear"]}
-    config["figures"]["fig7_group"] = "g"
-    config["lrde"].update(n_ensembles=2, n_walkers=16, n_steps=100, n_burn=100, ppc_draws=5)
-    (path / "config.yaml").write_text(yaml.safe_dump(config))
+    entries.append(lrde_entry("lrde", "lrde.parquet"))
+    write_workspace(path, entries, fig7_group="g")
     return path
 
 
-def _command(work: Path, *extra: str) -> list[str]:
-    return [str(SNAKEMAKE), "--snakefile", str(ROOT / "Snakefile"), "--directory", str(work),
-            "--configfile", str(work / "config.yaml"), "--cores", "2", *extra]
-
-
 def _run(work: Path, *extra: str) -> subprocess.CompletedProcess:
-    proc = subprocess.run(_command(work, *extra), cwd=work, capture_output=True, text=True,
+    proc = subprocess.run(snakemake_command(work, *extra), cwd=work, capture_output=True, text=True,
                           timeout=900, env=dict(os.environ, MPLBACKEND="Agg"))
     assert proc.returncode == 0, proc.stderr[-4000:]
     return proc
@@ -108,7 +78,7 @@ def test_two_runs_are_byte_identical(reference, tmp_path):
 
 def test_sigkill_mid_job_then_rerun_matches_an_uninterrupted_run(reference, tmp_path):
     work = _workspace(tmp_path / "killed")
-    proc = subprocess.Popen(_command(work), cwd=work, stdout=subprocess.DEVNULL,
+    proc = subprocess.Popen(snakemake_command(work), cwd=work, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL, start_new_session=True,
                             env=dict(os.environ, MPLBACKEND="Agg"))
     # Kill once some outputs exist and jobs are running: the middle of the per-log stages.

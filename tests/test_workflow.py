@@ -7,33 +7,19 @@ second pass of ``make run`` (``batch_scope=completed``) builds the batch tables 
 """
 import json
 import os
-import shutil
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
-import yaml
 
 from enclab import io
 from enclab.lrde import simulate as lrde_sim
 from enclab.simulate import phantom_protocol_run
+from workspace import SNAKEMAKE, lrde_entry, phantom_entry, snakemake_command, write_workspace
 
 pytestmark = pytest.mark.slow
-
-ROOT = Path(__file__).resolve().parents[1]
-SNAKEMAKE = Path(sys.executable).with_name("snakemake")
-
-
-def _phantom_entry(name, file):
-    return {"id": name, "file": file, "format": "parquet", "device": "phantom_premium_1_5",
-            "group": "tiny", "time": {"column": "t", "unit": "s", "nominal_rate_hz": 1000.0},
-            "channels": [{"name": f"theta{j}", "column": f"theta{j}_counts", "role": "truth",
-                          "joint": j, "unit": "counts", "step": 1.25e-4} for j in (1, 2, 3)],
-            "analysis": {"requantize": {"steps": [1e-3]}}}
-
 
 @pytest.fixture(scope="module")
 def workflow_run(tmp_path_factory):
@@ -52,29 +38,12 @@ def workflow_run(tmp_path_factory):
                                                    n_cycles=8, noise_std=0.01 * step,
                                                    truth_step=step / 100)
     io.write_table(lrde_log, data / "lrde.parquet")
-    bad_entry = _phantom_entry("bad", "bad.csv") | {"format": "csv"}
-    lrde_entry = {"id": "lrde", "file": "lrde.parquet", "format": "parquet",
-                  "device": "lrde_axis", "time": {"column": "t", "unit": "s"},
-                  "channels": [
-                      {"name": "coarse", "column": "counts", "role": "measured", "joint": 1,
-                       "unit": "counts", "step": step},
-                      {"name": "fine", "column": "truth_counts", "role": "truth", "joint": 1,
-                       "unit": "counts", "step": step / 100}],
-                  "analysis": {"stages": ["lrde"]}}
-    manifest = {"data_root": "logs",
-                "logs": [_phantom_entry("good", "good.parquet"), bad_entry, lrde_entry]}
-    (work / "manifest.yaml").write_text(yaml.safe_dump(manifest))
-    config = yaml.safe_load((ROOT / "config.yaml").read_text())
-    config["manifest"] = "manifest.yaml"
-    config["derivatives"]["bank"] = {"d": [1, 2], "n": [1, 2], "fc_hz": [50, 100],
-                                     "discretization": ["exponential", "bilinear"]}
-    config["figures"]["fig7_group"] = "tiny"
-    config["lrde"].update(n_ensembles=2, n_walkers=16, n_steps=100, n_burn=100, ppc_draws=5)
-    (work / "config.yaml").write_text(yaml.safe_dump(config))
+    bad_entry = phantom_entry("bad", "bad.csv", "tiny") | {"format": "csv"}
+    write_workspace(work, [phantom_entry("good", "good.parquet", "tiny"), bad_entry,
+                           lrde_entry("lrde", "lrde.parquet")], fig7_group="tiny")
     raw_before = {p.name: p.read_bytes() for p in data.iterdir()}
     env = dict(os.environ, MPLBACKEND="Agg")
-    command = [str(SNAKEMAKE), "--snakefile", str(ROOT / "Snakefile"), "--directory", str(work),
-               "--configfile", str(work / "config.yaml"), "--cores", "2", "--keep-going"]
+    command = snakemake_command(work, "--keep-going")
     # The two passes of `make run`: everything, then the batch over the logs that completed.
     first = subprocess.run(command, cwd=work, capture_output=True, text=True, env=env,
                            timeout=900)

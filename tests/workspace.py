@@ -1,0 +1,50 @@
+"""Tiny workflow workspaces for the end-to-end tests (test_workflow.py, test_reruns.py)."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import yaml
+
+from enclab.lrde import simulate as lrde_sim
+
+ROOT = Path(__file__).resolve().parents[1]
+SNAKEMAKE = Path(sys.executable).with_name("snakemake")
+
+
+def phantom_entry(name: str, file: str, group: str) -> dict:
+    """A simulated Phantom run (phantom_protocol_run table), re-quantized to 1 mrad."""
+    return {"id": name, "file": file, "format": "parquet", "device": "phantom_premium_1_5",
+            "group": group, "time": {"column": "t", "unit": "s", "nominal_rate_hz": 1000.0},
+            "channels": [{"name": f"theta{j}", "column": f"theta{j}_counts", "role": "truth",
+                          "joint": j, "unit": "counts", "step": 1.25e-4} for j in (1, 2, 3)],
+            "analysis": {"requantize": {"steps": [1e-3]}}}
+
+
+def lrde_entry(name: str, file: str) -> dict:
+    """A lrde_sim.open_loop_log table with a step/100 truth channel, paper-002 stage only."""
+    step = lrde_sim.ROS_DRILL_STEP
+    return {"id": name, "file": file, "format": "parquet", "device": "lrde_axis",
+            "time": {"column": "t", "unit": "s"},
+            "channels": [{"name": "coarse", "column": "counts", "role": "measured", "joint": 1,
+                          "unit": "counts", "step": step},
+                         {"name": "fine", "column": "truth_counts", "role": "truth", "joint": 1,
+                          "unit": "counts", "step": step / 100}],
+            "analysis": {"stages": ["lrde"]}}
+
+
+def write_workspace(work: Path, entries: list[dict], fig7_group: str) -> None:
+    """manifest.yaml and a config.yaml with a small filter bank and a short sampler."""
+    (work / "manifest.yaml").write_text(yaml.safe_dump({"data_root": "logs", "logs": entries}))
+    config = yaml.safe_load((ROOT / "config.yaml").read_text())
+    config["manifest"] = "manifest.yaml"
+    config["derivatives"]["bank"] = {"d": [1, 2], "n": [1, 2], "fc_hz": [50, 100],
+                                     "discretization": ["exponential", "bilinear"]}
+    config["figures"]["fig7_group"] = fig7_group
+    config["lrde"].update(n_ensembles=2, n_walkers=16, n_steps=100, n_burn=100, ppc_draws=5)
+    (work / "config.yaml").write_text(yaml.safe_dump(config))
+
+
+def snakemake_command(work: Path, *extra: str) -> list[str]:
+    return [str(SNAKEMAKE), "--snakefile", str(ROOT / "Snakefile"), "--directory", str(work),
+            "--configfile", str(work / "config.yaml"), "--cores", "2", *extra]
