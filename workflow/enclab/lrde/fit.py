@@ -292,10 +292,10 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
         ``a = a_eq - rest_position``. Ignored when ``truth`` is given.
     sigma_range : (float, float), optional
         Prior range of the position jitter ``sigma`` in steps (log-uniform inside), default
-        ``(1e-4, 10**-0.5)``. Give the range a lab knows for its encoder: with small jitter
-        the readings rarely show it, and an open range lets ``sigma`` collapse far below the
-        truth, which narrows the intervals of ``A12`` and ``E_b`` too much
-        (workflow/benchmarks/bench_lrde.py ``--sigma-range``).
+        ``(1e-4, 10**-0.5)``. With small jitter the readings rarely show it and its posterior
+        collapses below the truth, which narrows the intervals of ``A12`` and ``E_b`` too
+        much; a lab that knows its jitter closely can give it here (measured effect: README,
+        "Known limitation"; workflow/benchmarks/bench_lrde.py ``--sigma-range``).
 
     Returns
     -------
