@@ -78,6 +78,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from enclab.quantize import ratio_of
+
 __all__ = [
     "QuantizerErrorModel",
     "impulse_autocorrelation",
@@ -103,7 +105,6 @@ __all__ = [
 # Increments of a quantized truth must be whole fine steps; float storage of
 # counts * truth_step perturbs them by ~1e-16 * counts, far below this tolerance.
 _GRID_TOL = 1e-6
-_RATIO_TOL = 1e-9
 
 
 def _positive_float(name: str, value) -> float:
@@ -163,13 +164,7 @@ class QuantizerErrorModel:
         object.__setattr__(self, "offset_frac", float(off))
         if self.truth_step is not None:
             truth_step = _positive_float("truth_step", self.truth_step)
-            ratio = step / truth_step
-            r = round(ratio)
-            if r < 1 or abs(ratio - r) > _RATIO_TOL * ratio:
-                raise ValueError(
-                    f"step / truth_step must be a positive integer, got step={step!r}, "
-                    f"truth_step={truth_step!r} (ratio {ratio!r})"
-                )
+            ratio_of(step, truth_step)  # raises unless step is an integer multiple
             object.__setattr__(self, "truth_step", truth_step)
 
     @property
@@ -748,12 +743,8 @@ def exact_mean_joint_architecture(J, H, phi, models, h) -> np.ndarray:
     ``mean_k sum_i (J_ji sum(h) + c_ji) mean_i`` (~0 for derivative filters).
 
     Shapes as in :func:`exact_std_joint_architecture`; returns shape (m,)."""
-    J = _jacobian(J)
-    if J.ndim != 3:
-        raise ValueError(f"J must have shape (N, m, n), got {J.shape}")
-    n_samples, m_out, n = J.shape
-    H = np.asarray(H, dtype=np.float64)
-    _samples_match("H", H, n_samples, (m_out, n, n))
+    J, H = _jacobians_and_hessians(J, H)
+    n_samples, _, n = J.shape
     phi = np.asarray(phi, dtype=np.float64)
     _samples_match("phi", phi, n_samples, (n,))
     models = _models(models, n)
@@ -766,7 +757,8 @@ def exact_mean_joint_architecture(J, H, phi, models, h) -> np.ndarray:
 # ----------------------------------------------------------------------------- trajectory bounds
 
 
-def _check_bound_inputs(J, H, max_abs_err, third_derivative_bound):
+def _jacobians_and_hessians(J, H):
+    """Per-sample Jacobians (N, m, n) and Hessians (N, m, n, n), checked and as float arrays."""
     J = _jacobian(J)
     if J.ndim != 3:
         raise ValueError(f"J must have shape (N, m, n), got {J.shape}")
@@ -775,6 +767,12 @@ def _check_bound_inputs(J, H, max_abs_err, third_derivative_bound):
     _samples_match("H", H, n_samples, (m_out, n, n))
     if not np.all(np.isfinite(H)):
         raise ValueError("H must be finite")
+    return J, H
+
+
+def _check_bound_inputs(J, H, max_abs_err, third_derivative_bound):
+    J, H = _jacobians_and_hessians(J, H)
+    _, m_out, n = J.shape
     emax = _per_joint(max_abs_err, n, "max_abs_err")
     t3 = _per_joint(third_derivative_bound, m_out, "third_derivative_bound")
     return J, H, emax, t3
