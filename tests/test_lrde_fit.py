@@ -27,6 +27,50 @@ def test_log_interval_prob_matches_direct_and_tails():
     assert fit._log_interval_prob(np.array([-30.0]), np.array([30.0]))[0] == 0.0
 
 
+def test_sine_on_grid_matches_numpy_sine_on_long_logs():
+    # 1e6 samples (500 s at 2 kHz): the block rotation takes no recurrence, so its error stays
+    # at the angle's rounding (|angle| <= 2 pi f (t_max - t_ref) ~ 6e4 rad, ulp ~ 7e-12).
+    rng = np.random.default_rng(4)
+    t = 3.0 + np.arange(1_000_000) / 2000.0
+    grid = fit.uniform_grid(t)
+    assert grid is not None and grid[2] == t.size
+    omega = 2 * np.pi * rng.uniform(15, 25, 4)
+    phase = rng.uniform(-np.pi, np.pi, 4)
+    t_ref = 0.5 * (t[0] + t[-1])
+    direct = np.sin(np.multiply.outer(omega, t - t_ref) + phase[:, None])
+    angle_ulp = np.spacing(np.max(omega) * (t[-1] - t_ref))
+    np.testing.assert_allclose(fit._sine_on_grid(omega, phase, grid, t_ref), direct, rtol=0,
+                               atol=8 * angle_ulp)
+    # Timestamp jitter (here 1e-6 s on a 0.5 ms grid) takes the direct path.
+    jittered = t[:5000] + rng.normal(0, 1e-6, 5000)
+    assert fit.uniform_grid(np.sort(jittered)) is None
+
+
+def test_likelihood_paths_and_sigma_prior_agree_with_definitions():
+    df, p = _log(21, n_cycles=4)
+    t, c = df["t"].to_numpy(), df["counts"].to_numpy()
+    init = fit.initial_guess(t, c, STEP)
+    rng = np.random.default_rng(5)
+    x0 = np.array([init["A12"] / STEP, init["E_b"] / STEP, init["f_hz"], init["phase"], -2.0])
+    rows = x0 + np.array([0.01, 0.01, 1e-3, 0.01, 0.8]) * rng.standard_normal((12, 5))
+    kw = dict(t=t, counts=c, step=STEP, centre_count=init["centre_count"], t_ref=init["t_ref"])
+    direct = fit.log_likelihood(rows, **kw)
+    on_grid = fit.log_likelihood(rows, grid=fit.uniform_grid(t), **kw)
+    np.testing.assert_allclose(on_grid, direct, rtol=1e-10)
+    # Definition: sum of log(Phi(u) - Phi(l)) over every sample, no deep-interval shortcut.
+    A, eb, f, ph, ls = rows[0]
+    z = init["centre_count"] + 0.5 + eb + 0.5 * A * np.sin(2 * np.pi * f * (t - init["t_ref"]) + ph)
+    s = 10.0 ** ls
+    reference = fit._log_interval_prob((c - z) / s, (c + 1 - z) / s).sum()
+    assert direct[0] == pytest.approx(reference, rel=1e-12, abs=1e-9)
+    bounds = np.array([[-10, 10], [-10, 10], [0, 100], [-50, 50], [-5, 0]], dtype=float)
+    lu = fit.log_probability(rows, bounds=bounds, sigma_prior="log-uniform", **kw)
+    un = fit.log_probability(rows, bounds=bounds, sigma_prior="uniform", **kw)
+    np.testing.assert_allclose(un - lu, np.log(10.0) * rows[:, 4], rtol=1e-12)
+    with pytest.raises(ValueError, match="sigma_prior"):
+        fit.log_probability(rows, bounds=bounds, sigma_prior="flat", **kw)
+
+
 def _log(seed, n_cycles=5, noise=0.02, offset_frac=0.4, E_frac=0.3, truth_step=None):
     A12 = 3.44 * STEP
     E_b = E_frac * 0.5 * model.epsilon(A12, STEP)

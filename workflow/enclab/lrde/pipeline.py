@@ -15,9 +15,10 @@ With a truth channel (and ``settings["use_truth"]``, default True) the fit repor
 it uses that known motion centre; otherwise both are None with the reason.
 
 Settings keys (all optional): ``channel``, ``requantize``, ``use_truth``, ``rest_position``,
-``f_hz``, ``n_ensembles`` (4), ``n_walkers`` (32), ``n_steps`` (400), ``n_burn`` (400),
-``ppc_draws`` (40), ``sigma_range_steps`` (prior range of the jitter in steps, see
-:func:`enclab.lrde.fit.fit_sinusoid`).
+``f_hz``, ``n_ensembles`` (4), ``n_walkers`` (32), ``n_steps`` (250), ``n_burn`` (250),
+``ppc_draws`` (40), ``sigma_range_steps`` (prior range of the jitter in steps) and
+``sigma_prior`` (``"uniform"`` or ``"log-uniform"``), see
+:func:`enclab.lrde.fit.fit_sinusoid`.
 """
 from __future__ import annotations
 
@@ -33,7 +34,8 @@ __all__ = ["select_channels", "analyse_lrde_log"]
 _log = logging.getLogger(__name__)
 
 _KNOWN_SETTINGS = {"channel", "requantize", "use_truth", "rest_position", "f_hz", "n_ensembles",
-                   "n_walkers", "n_steps", "n_burn", "ppc_draws", "sigma_range_steps"}
+                   "n_walkers", "n_steps", "n_burn", "ppc_draws", "sigma_range_steps",
+                   "sigma_prior"}
 
 
 def _angle(df: pd.DataFrame, channel: dict) -> np.ndarray:
@@ -142,12 +144,13 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict):
         t, counts, step, fit_seed,
         n_ensembles=int(settings.get("n_ensembles", 4)),
         n_walkers=int(settings.get("n_walkers", 32)),
-        n_steps=int(settings.get("n_steps", 400)),
-        n_burn=int(settings.get("n_burn", 400)),
+        n_steps=int(settings.get("n_steps", 250)),
+        n_burn=int(settings.get("n_burn", 250)),
         f_hz=f_hz,
         truth=truth if settings.get("use_truth", True) else None,
         rest_position=settings.get("rest_position"),
         sigma_range=settings.get("sigma_range_steps"),
+        sigma_prior=settings.get("sigma_prior", "uniform"),
     )
     # The wall time goes to the log, not the block: summary.json must be byte-reproducible.
     _log.info("emcee fit: %.1f s wall, acceptance %.2f", result.wall_time_s, result.acceptance)
