@@ -37,6 +37,9 @@ from matplotlib.figure import Figure
 from enclab.lrde import dwell, fit, model, simulate
 
 STEP = simulate.ROS_DRILL_STEP
+# Draws whose pooled sampling phases leave a gap above this (in samples) count as
+# commensurate in the summary (see sampling_phase_gap).
+COMMENSURATE_GAP = 0.5
 
 
 def one_draw(rng, n_cycles, fs_hz, f_nominal, noise_frac, fit_seed, sampler):
@@ -51,7 +54,8 @@ def one_draw(rng, n_cycles, fs_hz, f_nominal, noise_frac, fit_seed, sampler):
                                    noise_std=noise_frac * STEP)
     t, c = df["t"].to_numpy(), df["counts"].to_numpy()
     rows = []
-    base = {"cycles": n_cycles, "A12_true": A12, "E_b_true": E_b}
+    base = {"cycles": n_cycles, "A12_true": A12, "E_b_true": E_b, "f_hz_true": f_hz,
+            "phase_gap": sampling_phase_gap(fs_hz / f_hz, n_cycles)}
     table = dwell.cycle_table(c, t, STEP)
     summ = dwell.dwell_summary(table)
     used = table[table["symmetric"] & (table["n"] == 2) & (table["centre_count"] == 0)]
@@ -94,13 +98,33 @@ def one_draw(rng, n_cycles, fs_hz, f_nominal, noise_frac, fit_seed, sampler):
     return rows
 
 
+def sampling_phase_gap(samples_per_period, n_cycles):
+    """Largest gap, in samples, between the sampling phases of ``n_cycles`` periods.
+
+    Cycle ``k`` is sampled at offsets ``k * samples_per_period mod 1`` (in samples) from the
+    first cycle's grid; sorted on the circle, their largest gap is the time resolution with
+    which the pooled cycles locate a reading change. Near 1 the sampling is commensurate with
+    the motion (every cycle sampled at the same phases) and pooling cycles cannot resolve a
+    dwell edge better than one sample; near ``1 / n_cycles`` the phases are evenly spread.
+    """
+    offsets = np.sort(np.mod(np.arange(max(int(n_cycles), 1)) * samples_per_period, 1.0))
+    gaps = np.diff(np.concatenate([offsets, [offsets[0] + 1.0]]))
+    return float(gaps.max())
+
+
 def summarise(draws: pd.DataFrame) -> pd.DataFrame:
     out = []
-    for (cycles, est), g in draws.groupby(["cycles", "estimator"]):
+    draws = draws.assign(sampling=np.where(draws["phase_gap"] > COMMENSURATE_GAP,
+                                           "commensurate", "spread"))
+    groups = [((c, e, "all"), g) for (c, e), g in draws.groupby(["cycles", "estimator"])]
+    groups += [((c, e, s), g) for (c, e, s), g
+               in draws.groupby(["cycles", "estimator", "sampling"])]
+    for (cycles, est, sampling), g in groups:
         n_failed = int((~np.isfinite(g["A12"])).sum())
         g = g[np.isfinite(g["A12"])]
         eA, eE = g["A12"] - g["A12_true"], g["E_b"] - g["E_b_true"]
-        row = {"cycles": cycles, "estimator": est, "n": len(g), "n_failed": n_failed,
+        row = {"cycles": cycles, "estimator": est, "draws": sampling, "n": len(g),
+               "n_failed": n_failed,
                "A12_rmse_step": np.sqrt(np.mean(eA**2)) / STEP,
                "A12_bias_step": eA.mean() / STEP,
                "E_b_rmse_step": np.sqrt(np.mean(eE**2)) / STEP,
@@ -116,12 +140,13 @@ def summarise(draws: pd.DataFrame) -> pd.DataFrame:
                 "converged_fraction": g["converged"].astype(float).mean(),
                 "rhat_max": g["rhat_max"].max()}
         out.append(row)
-    return pd.DataFrame(out)
+    return pd.DataFrame(out).sort_values(["draws", "cycles", "estimator"], kind="stable")
 
 
 def rmse_figure(summary: pd.DataFrame) -> Figure:
     fig = Figure(figsize=(9, 4), layout="constrained")
     axes = fig.subplots(1, 2)
+    summary = summary[summary["draws"] == "all"]
     for ax, col, label in zip(axes, ("A12_rmse_step", "E_b_rmse_step"),
                               ("A12 RMSE [steps]", "E_b RMSE [steps]")):
         for est, g in summary.groupby("estimator"):
