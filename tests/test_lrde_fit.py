@@ -94,6 +94,13 @@ def test_small_fit_recovers_stroke_and_bias_deviation():
     assert s["A12"]["q95"] - s["A12"]["q05"] < 0.1 * STEP
     # The truth channel identifies b (to its 0.01-step rounding) and hence a = a_eq - b.
     assert r.bias_b["median"] == pytest.approx(p["bias"], abs=0.01 * STEP)
+    # b's interval comes from the truth's residual: non-degenerate, and of the order of the
+    # residual's white-noise value: the truth reads the jittered angle (0.02 step) with a
+    # 0.01-step rounding, over sqrt(N) (N = 500 samples here).
+    b_width = r.bias_b["q95"] - r.bias_b["q05"]
+    residual_std = STEP * np.sqrt(0.02**2 + 0.01**2 / 12)
+    white_width = 2 * 1.645 * residual_std / np.sqrt(len(df))
+    assert 0.3 * white_width < b_width < 5 * white_width
     assert r.offset_a["q05"] - 0.01 * STEP < p["offset_a"] < r.offset_a["q95"] + 0.01 * STEP
     assert r.samples.shape == (2 * 16 * 200, 5)
     assert set(r.rhat) == set(fit.PARAM_NAMES) and all(np.isfinite(list(r.tau.values())))

@@ -42,7 +42,7 @@ STEP = simulate.ROS_DRILL_STEP
 COMMENSURATE_GAP = 0.5
 
 
-def one_draw(rng, n_cycles, fs_hz, f_nominal, noise_frac, fit_seed, sampler):
+def one_draw(rng, n_cycles, fs_hz, f_nominal, noise_frac, fit_seed, sampler, truth_frac=None):
     f_hz = f_nominal * rng.uniform(0.9, 1.1)
     a_frac = rng.uniform(0, 1)
     A12 = rng.uniform(3.0, 5.0) * STEP
@@ -51,8 +51,10 @@ def one_draw(rng, n_cycles, fs_hz, f_nominal, noise_frac, fit_seed, sampler):
     bias = E_b + 0.5 * STEP - a_frac * STEP
     df, p = simulate.open_loop_log(rng, A12=A12, bias=bias, f_hz=f_hz, fs_hz=fs_hz,
                                    n_cycles=n_cycles + 1, offset_frac=a_frac,
-                                   noise_std=noise_frac * STEP)
+                                   noise_std=noise_frac * STEP,
+                                   truth_step=None if truth_frac is None else truth_frac * STEP)
     t, c = df["t"].to_numpy(), df["counts"].to_numpy()
+    truth = None if truth_frac is None else df["truth_counts"].to_numpy() * truth_frac * STEP
     rows = []
     base = {"cycles": n_cycles, "A12_true": A12, "E_b_true": E_b, "f_hz_true": f_hz,
             "phase_gap": sampling_phase_gap(fs_hz / f_hz, n_cycles)}
@@ -83,7 +85,7 @@ def one_draw(rng, n_cycles, fs_hz, f_nominal, noise_frac, fit_seed, sampler):
                         "A12": 2 * STEP * np.hypot(coef[1], coef[2]),
                         "E_b": STEP * coef[0]})
     started = time.perf_counter()
-    r = fit.fit_sinusoid(t, c, STEP, seed=fit_seed, **sampler)
+    r = fit.fit_sinusoid(t, c, STEP, seed=fit_seed, truth=truth, **sampler)
     wall = time.perf_counter() - started
     s = r.summary
     # E_b relative to count 0 (the truth's frame) = a_eq - step/2, whatever centre count the
@@ -94,7 +96,10 @@ def one_draw(rng, n_cycles, fs_hz, f_nominal, noise_frac, fit_seed, sampler):
         "A12_q05": s["A12"]["q05"], "A12_q95": s["A12"]["q95"],
         "E_b_q05": eb["q05"], "E_b_q95": eb["q95"],
         "wall_s": wall, "ess_min": min(r.ess.values()), "rhat_max": max(r.rhat.values()),
-        "converged": r.converged})
+        "converged": r.converged}
+        | ({} if r.offset_a is None else {
+            "a_true": p["offset_a"], "a_q05": r.offset_a["q05"], "a_q95": r.offset_a["q95"],
+            "b_true": p["bias"], "b_q05": r.bias_b["q05"], "b_q95": r.bias_b["q95"]}))
     return rows
 
 
@@ -139,6 +144,10 @@ def summarise(draws: pd.DataFrame) -> pd.DataFrame:
                 "ess_per_s_median": (g["ess_min"] / g["wall_s"]).median(),
                 "converged_fraction": g["converged"].astype(float).mean(),
                 "rhat_max": g["rhat_max"].max()}
+            if "a_true" in g:
+                row |= {name + "_cover90": np.mean((g[name + "_q05"] < g[name + "_true"])
+                                                   & (g[name + "_true"] < g[name + "_q95"]))
+                        for name in ("a", "b")}
         out.append(row)
     return pd.DataFrame(out).sort_values(["draws", "cycles", "estimator"], kind="stable")
 
@@ -163,7 +172,7 @@ def _task(cycles, d, child, args, sampler):
     sim_seed, fit_seed = child.spawn(2)
     return [row | {"draw": d} for row in one_draw(np.random.default_rng(sim_seed), cycles,
                                                    args.fs, args.f, args.noise, fit_seed,
-                                                   sampler)]
+                                                   sampler, args.truth_step)]
 
 
 def main(argv=None):
@@ -178,6 +187,9 @@ def main(argv=None):
     ap.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
     ap.add_argument("--n-steps", type=int, default=400, help="as config.yaml lrde.n_steps")
     ap.add_argument("--n-burn", type=int, default=400, help="as config.yaml lrde.n_burn")
+    ap.add_argument("--truth-step", type=float, default=None, metavar="FRACTION",
+                    help="add a fine truth channel of this step (fraction of the coarse step, "
+                         "e.g. 0.01) and score the offset a and bias b intervals")
     ap.add_argument("--sigma-range", type=float, nargs=2, default=None, metavar=("LO", "HI"),
                     help="jitter prior range in steps (default: the fit's open range)")
     args = ap.parse_args(argv)
@@ -189,6 +201,12 @@ def main(argv=None):
     for cycles, ss in zip(args.cycles, root.spawn(len(args.cycles))):
         for d, child in enumerate(ss.spawn(args.draws)):
             tasks.append((cycles, d, child))
+    # Interleaved by draw, so that a run stopped early has as many draws of every cycle count;
+    # the draws table is rewritten every 20 fits (``--partial``-style resumption is not needed:
+    # seeds are fixed per (cycles, draw)).
+    tasks.sort(key=lambda task: (task[1], task[0]))
+    out = pathlib.Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
     rows = []
     # Seeds are fixed per (cycles, draw) before any work starts, so the rows do not depend on
     # --jobs; wall times do (two fits on two cores contend for memory bandwidth).
@@ -199,12 +217,13 @@ def main(argv=None):
             rows += future.result()
             cycles, d = futures[future]
             print(f"[{k}/{len(tasks)}] cycles={cycles} draw={d + 1}/{args.draws}", flush=True)
+            if k % 20 == 0:
+                pd.DataFrame(rows).to_csv(out / "lrde_draws.partial.csv", index=False)
     rows.sort(key=lambda r: (r["cycles"], r["draw"]))
     draws = pd.DataFrame(rows)
     summary = summarise(draws)
-    out = pathlib.Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     draws.to_csv(out / "lrde_draws.csv", index=False)
+    (out / "lrde_draws.partial.csv").unlink(missing_ok=True)
     summary.to_csv(out / "lrde_summary.csv", index=False)
     rmse_figure(summary).savefig(out / "lrde_rmse.png", dpi=120, metadata={"Software": None})
     with pd.option_context("display.width", 200, "display.max_columns", 30):
