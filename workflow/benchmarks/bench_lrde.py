@@ -187,6 +187,8 @@ def main(argv=None):
     ap.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
     ap.add_argument("--n-steps", type=int, default=400, help="as config.yaml lrde.n_steps")
     ap.add_argument("--n-burn", type=int, default=400, help="as config.yaml lrde.n_burn")
+    ap.add_argument("--resume", action="store_true",
+                    help="skip the (cycles, draw) pairs already in <out>/lrde_draws.partial.csv")
     ap.add_argument("--truth-step", type=float, default=None, metavar="FRACTION",
                     help="add a fine truth channel of this step (fraction of the coarse step, "
                          "e.g. 0.01) and score the offset a and bias b intervals")
@@ -202,12 +204,20 @@ def main(argv=None):
         for d, child in enumerate(ss.spawn(args.draws)):
             tasks.append((cycles, d, child))
     # Interleaved by draw, so that a run stopped early has as many draws of every cycle count;
-    # the draws table is rewritten every 20 fits (``--partial``-style resumption is not needed:
-    # seeds are fixed per (cycles, draw)).
+    # the draws done so far are rewritten to lrde_draws.partial.csv every 20 fits, and
+    # --resume skips them (seeds are fixed per (cycles, draw), so the rows are the same).
     tasks.sort(key=lambda task: (task[1], task[0]))
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rows = []
+    partial = out / "lrde_draws.partial.csv"
+    if args.resume and partial.exists():
+        done = pd.read_csv(partial)
+        rows = [{k: v for k, v in r.items() if not (isinstance(v, float) and np.isnan(v))}
+                for r in done.to_dict("records")]
+        finished = set(zip(done["cycles"], done["draw"]))
+        tasks = [task for task in tasks if (task[0], task[1]) not in finished]
+        print(f"resuming: {len(finished)} draws read from {partial}", flush=True)
     # Seeds are fixed per (cycles, draw) before any work starts, so the rows do not depend on
     # --jobs; wall times do (two fits on two cores contend for memory bandwidth).
     with concurrent.futures.ProcessPoolExecutor(max_workers=args.jobs) as pool:
@@ -218,12 +228,12 @@ def main(argv=None):
             cycles, d = futures[future]
             print(f"[{k}/{len(tasks)}] cycles={cycles} draw={d + 1}/{args.draws}", flush=True)
             if k % 20 == 0:
-                pd.DataFrame(rows).to_csv(out / "lrde_draws.partial.csv", index=False)
+                pd.DataFrame(rows).to_csv(partial, index=False)
     rows.sort(key=lambda r: (r["cycles"], r["draw"]))
     draws = pd.DataFrame(rows)
     summary = summarise(draws)
     draws.to_csv(out / "lrde_draws.csv", index=False)
-    (out / "lrde_draws.partial.csv").unlink(missing_ok=True)
+    partial.unlink(missing_ok=True)
     summary.to_csv(out / "lrde_summary.csv", index=False)
     rmse_figure(summary).savefig(out / "lrde_rmse.png", dpi=120, metadata={"Software": None})
     with pd.option_context("display.width", 200, "display.max_columns", 30):

@@ -62,6 +62,20 @@ __all__ = ["PARAM_NAMES", "FitResult", "log_likelihood", "log_probability", "ini
            "fit_sinusoid"]
 
 PARAM_NAMES = ("A12", "E_b", "f_hz", "phase", "sigma")
+_HARMONIC_BOUND = 0.5  # |c_k|, |s_k| < step / 2: distortion well below the stroke
+
+
+def param_names(harmonics=()) -> tuple:
+    """Names of the sampled parameters: :data:`PARAM_NAMES` then ``c_k, s_k`` per harmonic."""
+    return PARAM_NAMES + tuple(f"{x}{k}" for k in harmonics for x in ("c", "s"))
+
+
+def _check_harmonics(harmonics) -> tuple:
+    h = tuple(harmonics)
+    if any(isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 2 for k in h) \
+            or len(set(h)) != len(h) or list(h) != sorted(h):
+        raise ValueError(f"harmonics must be increasing distinct integers >= 2, got {harmonics!r}")
+    return tuple(int(k) for k in h)
 _DEEP = 8.0
 _LOG_SIGMA_BOUNDS = (-4.0, -0.5)
 _UNIDENTIFIED = ("readings identify only a_eq = a + b (Zhang & Gao eq. 13b); the offset a and "
@@ -110,8 +124,8 @@ def uniform_grid(t, rtol=1e-9):
 _BLOCK = 64
 
 
-def _sine_on_grid(omega, phase, grid, t_ref):
-    """``sin(omega (t - t_ref) + phase)`` for ``t = t0 + k dt``, one row per ``omega``.
+def _phasor_on_grid(omega, phase, grid, t_ref):
+    """``exp(i (omega (t - t_ref) + phase))`` for ``t = t0 + k dt``, one row per ``omega``.
 
     ``exp(i omega (t0 + (B j + m) dt))`` is the product of a block start
     ``exp(i omega (t0 + B j dt))`` and an in-block rotation ``exp(i omega m dt)``, so only
@@ -125,10 +139,41 @@ def _sine_on_grid(omega, phase, grid, t_ref):
     starts = np.exp(1j * (np.multiply.outer(omega, (t0 - t_ref) + dt * _BLOCK
                                             * np.arange(n_blocks)) + phase[:, None]))
     rot = starts[:, :, None] * within[:, None, :]
-    return rot.reshape(omega.size, -1)[:, :n].imag
+    return rot.reshape(omega.size, -1)[:, :n]
 
 
-def log_likelihood(params, t, counts, step, centre_count, t_ref, grid=None):
+def _sine_on_grid(omega, phase, grid, t_ref):
+    """``sin(omega (t - t_ref) + phase)`` on a uniform grid (see :func:`_phasor_on_grid`)."""
+    return _phasor_on_grid(omega, phase, grid, t_ref).imag
+
+
+def _motion_steps(p, t, t_ref, grid, harmonics):
+    """``A/2 sin(phi) + sum_k (c_k cos(k phi) + s_k sin(k phi))`` in steps, rows of ``p``."""
+    A, f, phase = p[:, 0:1], p[:, 2], p[:, 3]
+    omega = 2.0 * np.pi * f
+    if not harmonics:
+        if grid is None:
+            sine = np.multiply.outer(omega, t - t_ref)
+            sine += phase[:, None]
+            np.sin(sine, out=sine)
+        else:
+            sine = _sine_on_grid(omega, phase, grid, t_ref)
+        sine *= 0.5 * A
+        return sine
+    if grid is None:
+        phasor = np.exp(1j * (np.multiply.outer(omega, t - t_ref) + phase[:, None]))
+    else:
+        phasor = _phasor_on_grid(omega, phase, grid, t_ref)
+    motion = 0.5 * A * phasor.imag
+    power, order = phasor, 1
+    for j, k in enumerate(harmonics):
+        while order < k:
+            power, order = power * phasor, order + 1
+        motion += p[:, 5 + 2 * j:6 + 2 * j] * power.real + p[:, 6 + 2 * j:7 + 2 * j] * power.imag
+    return motion
+
+
+def log_likelihood(params, t, counts, step, centre_count, t_ref, grid=None, harmonics=()):
     """Log-likelihood of the counts for parameter rows in internal units.
 
     Parameters
@@ -147,23 +192,21 @@ def log_likelihood(params, t, counts, step, centre_count, t_ref, grid=None):
         Time origin of the phase, s.
     grid : tuple, optional
         ``uniform_grid(t)`` when ``t`` is uniformly sampled (faster sine), else None.
+    harmonics : tuple of int
+        Orders ``k >= 2`` of harmonic distortion of the motion; each adds the columns
+        ``c_k / step, s_k / step`` (after the five above) of ``c_k cos(k phi) + s_k sin(k phi)``
+        with ``phi`` the fundamental's phase.
 
     Returns
     -------
     numpy.ndarray, shape (n_walkers,) (or float for a single row)
     """
     p = np.atleast_2d(params)
-    A, eb, f, phase, log_s = (p[:, i:i + 1] for i in range(5))
+    eb, log_s = p[:, 1:2], p[:, 4:5]
     inv_s = 10.0 ** -log_s
-    omega = 2.0 * np.pi * f[:, 0]
-    if grid is None:
-        sine = np.multiply.outer(omega, t - t_ref)
-        sine += phase
-        np.sin(sine, out=sine)
-    else:
-        sine = _sine_on_grid(omega, phase[:, 0], grid, t_ref)
-    # lower = (k - z) / s with z = m + 1/2 + E_b + A/2 sin, built in place (memory-bound).
-    lower = sine * (-0.5 * A)
+    # lower = (k - z) / s with z = m + 1/2 + E_b + motion, built in place (memory-bound).
+    lower = _motion_steps(p, t, t_ref, grid, harmonics)
+    lower *= -1.0
     lower += counts
     lower -= centre_count + 0.5 + eb
     lower *= inv_s
@@ -191,7 +234,7 @@ def _log_interval_prob_scaled(lower, inv_s):
 
 
 def log_probability(params, t, counts, step, centre_count, t_ref, bounds, grid=None,
-                    sigma_prior="log-uniform"):
+                    sigma_prior="log-uniform", harmonics=()):
     """Log-posterior (uniform priors on ``bounds``, rows outside get ``-inf``); vectorised.
 
     ``sigma_prior`` is the prior of the jitter inside its bounds: ``"log-uniform"`` (flat in
@@ -202,7 +245,8 @@ def log_probability(params, t, counts, step, centre_count, t_ref, bounds, grid=N
     inside = np.all((p > bounds[:, 0]) & (p < bounds[:, 1]), axis=1)
     out = np.full(p.shape[0], -np.inf)
     if np.any(inside):
-        out[inside] = log_likelihood(p[inside], t, counts, step, centre_count, t_ref, grid)
+        out[inside] = log_likelihood(p[inside], t, counts, step, centre_count, t_ref, grid,
+                                     harmonics)
         if sigma_prior == "uniform":
             out[inside] += np.log(10.0) * p[inside, 4]
         elif sigma_prior != "log-uniform":
@@ -308,6 +352,17 @@ class FitResult:
     settings: dict = field(default_factory=dict)
 
     @property
+    def harmonics(self) -> tuple:
+        """Orders of the harmonic-distortion terms of the motion model (empty: a pure sine)."""
+        return tuple(self.settings.get("harmonics", ()))
+
+    def motion(self, t, row) -> np.ndarray:
+        """Motion about the bias, ``theta(t) - b``, in rad, for one SI sample row."""
+        t = np.asarray(t, dtype=float)
+        internal = _to_internal(np.asarray(row, dtype=float)[None, :], self.step)
+        return self.step * _motion_steps(internal, t, self.t_ref, None, self.harmonics)[0]
+
+    @property
     def medians(self) -> dict:
         return {k: v["median"] for k, v in self.summary.items()}
 
@@ -339,6 +394,16 @@ def _to_si(internal, step):
     out[..., 0] *= step
     out[..., 1] *= step
     out[..., 4] = step * 10.0 ** internal[..., 4]
+    out[..., 5:] *= step
+    return out
+
+
+def _to_internal(si, step):
+    out = np.array(si, dtype=float, copy=True)
+    out[..., 0] /= step
+    out[..., 1] /= step
+    out[..., 4] = np.log10(si[..., 4] / step)
+    out[..., 5:] /= step
     return out
 
 
@@ -359,7 +424,7 @@ def _check_int_counts(counts, n):
 
 def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250, n_burn=150,
                  f_hz=None, truth=None, rest_position=None, sigma_range=None,
-                 sigma_prior="uniform", moves="de") -> FitResult:
+                 sigma_prior="uniform", moves="de", harmonics=()) -> FitResult:
     """Posterior of stroke, bias deviation, frequency, phase and noise from coarse counts.
 
     Parameters
@@ -392,6 +457,11 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
     sigma_prior : {"uniform", "log-uniform"}
         Prior density of ``sigma`` inside its range (see the module notes: the log-uniform
         prior gives too narrow intervals when the readings show little jitter).
+    harmonics : tuple of int
+        Orders of harmonic distortion of the motion to fit (e.g. ``(3,)``): each adds
+        ``c_k cos(k phi) + s_k sin(k phi)`` (rad, uniform prior on ``+-step/2``), reported as
+        ``c<k>``, ``s<k>``. ``A12`` is then twice the fundamental's amplitude. See
+        :func:`compare_motion_models` for choosing them on held-out data.
     moves : {"de", "de+snooker", "stretch"}
         emcee moves. Differential evolution alone mixes as well as with the snooker move on
         this posterior and costs less per step (the snooker proposal loops in Python).
@@ -429,6 +499,9 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
         if not (0 < lo < hi and np.isfinite(hi)):
             raise ValueError(f"sigma_range must be (lo, hi) steps with 0 < lo < hi, got {sigma_range!r}")
         log_sigma_bounds = (np.log10(lo), np.log10(hi))
+    harmonics = _check_harmonics(harmonics)
+    names = param_names(harmonics)
+    ndim = len(names)
     init = initial_guess(t, counts, step, f_hz=f_hz)
     K = init["steps_pp"]
     bounds = np.array([
@@ -437,32 +510,34 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
         [0.8 * init["f_hz"], 1.25 * init["f_hz"]],
         [init["phase"] - np.pi, init["phase"] + np.pi],
         list(log_sigma_bounds),
-    ])
+    ] + [[-_HARMONIC_BOUND, _HARMONIC_BOUND]] * (2 * len(harmonics)))
     centre = init["centre_count"]
     t_ref = init["t_ref"]
     log_sigma0 = np.log10(init["sigma"] / step)
     if not log_sigma_bounds[0] < log_sigma0 < log_sigma_bounds[1]:
         log_sigma0 = 0.5 * (log_sigma_bounds[0] + log_sigma_bounds[1])
     x0 = np.array([init["A12"] / step, init["E_b"] / step, init["f_hz"], init["phase"],
-                   log_sigma0])
+                   log_sigma0] + [0.0] * (2 * len(harmonics)))
     # Dispersion of the start: a few tenths of the expected posterior widths, so that
     # independent ensembles start apart and R-hat can detect non-mixing.
     duration = t[-1] - t[0]
-    scale = np.array([0.005, 0.003, 0.002 / duration, 0.005, 0.05])
+    scale = np.array([0.005, 0.003, 0.002 / duration, 0.005, 0.05]
+                     + [0.003] * (2 * len(harmonics)))
     if sigma_prior not in ("uniform", "log-uniform"):
         raise ValueError(f"sigma_prior must be 'uniform' or 'log-uniform', got {sigma_prior!r}")
     kwargs = {"t": t, "counts": counts, "step": step, "centre_count": centre, "t_ref": t_ref,
-              "bounds": bounds, "grid": uniform_grid(t), "sigma_prior": sigma_prior}
+              "bounds": bounds, "grid": uniform_grid(t), "sigma_prior": sigma_prior,
+              "harmonics": harmonics}
     chains, acceptance = [], []
     for child in root.spawn(n_ensembles):
         rng = np.random.default_rng(child)
-        start = x0 + scale * rng.standard_normal((n_walkers, 5))
+        start = x0 + scale * rng.standard_normal((n_walkers, ndim))
         start = np.clip(start, bounds[:, 0] + 1e-9 * np.ptp(bounds, axis=1),
                         bounds[:, 1] - 1e-9 * np.ptp(bounds, axis=1))
         # Differential-evolution moves mix about twice as fast as the default stretch move on
         # this nearly Gaussian 5-D posterior (emcee docs, "Using different moves").
         sampler = emcee.EnsembleSampler(
-            n_walkers, 5, log_probability, kwargs=kwargs, vectorize=True,
+            n_walkers, ndim, log_probability, kwargs=kwargs, vectorize=True,
             moves=_MOVES[moves]())
         # emcee draws from its own RandomState: seed it from this ensemble's child seed.
         sampler.random_state = np.random.RandomState(int(rng.integers(2**32))).get_state()
@@ -471,9 +546,9 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
         acceptance.append(float(np.mean(sampler.acceptance_fraction)))
     internal = np.stack(chains)  # (n_ens, n_steps, n_walkers, 5)
     si = _to_si(internal, step)
-    samples = si.reshape(-1, 5)
+    samples = si.reshape(-1, ndim)
     tau, rhat, ess = {}, {}, {}
-    for i, name in enumerate(PARAM_NAMES):
+    for i, name in enumerate(names):
         with _quiet_emcee():
             tau_i = max(float(emcee.autocorr.integrated_time(internal[e, :, :, i:i + 1],
                                                               quiet=True)[0])
@@ -483,7 +558,7 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
         ess[name] = float(internal[:, :, :, i].size / max(tau_i, 1.0))
     converged = bool(max(rhat.values()) <= 1.01 and min(ess.values()) >= 1000)
     a_eq = (centre + 0.5) * step + samples[:, 1]
-    summary = {name: _quantiles(samples[:, i]) for i, name in enumerate(PARAM_NAMES)}
+    summary = {name: _quantiles(samples[:, i]) for i, name in enumerate(names)}
     summary["a_eq"] = _quantiles(a_eq)
     offset_a = bias_b = None
     reason = _UNIDENTIFIED
@@ -521,11 +596,12 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
         summary["offset_a"] = offset_a
         summary["bias_b"] = bias_b
     return FitResult(
-        param_names=PARAM_NAMES, samples=samples, chains=si, a_eq_samples=a_eq,
+        param_names=names, samples=samples, chains=si, a_eq_samples=a_eq,
         summary=summary, offset_a=offset_a, bias_b=bias_b, reason=reason, tau=tau, rhat=rhat,
         ess=ess, converged=converged, step=step, centre_count=centre, steps_pp=K, t_ref=t_ref,
         init={k: v for k, v in init.items() if k not in ("cycles",)},
         acceptance=float(np.mean(acceptance)), wall_time_s=time.perf_counter() - started,
         settings={"n_ensembles": n_ensembles, "n_walkers": n_walkers, "n_steps": n_steps,
-                  "n_burn": n_burn, "bounds_internal": bounds.tolist()},
+                  "n_burn": n_burn, "bounds_internal": bounds.tolist(),
+                  "harmonics": list(harmonics), "sigma_prior": sigma_prior},
     )

@@ -18,7 +18,9 @@ Settings keys (all optional): ``channel``, ``requantize``, ``use_truth``, ``rest
 ``f_hz``, ``n_ensembles`` (4), ``n_walkers`` (32), ``n_steps`` (250), ``n_burn`` (250),
 ``ppc_draws`` (40), ``sigma_range_steps`` (prior range of the jitter in steps) and
 ``sigma_prior`` (``"uniform"`` or ``"log-uniform"``), see
-:func:`enclab.lrde.fit.fit_sinusoid`.
+:func:`enclab.lrde.fit.fit_sinusoid`; ``motion_models`` (harmonic orders of the candidate
+motion models compared on held-out halves, default ``[[], [2], [3]]``; ``[]`` turns the
+comparison off), see :func:`enclab.lrde.compare.compare_motion_models`.
 """
 from __future__ import annotations
 
@@ -27,7 +29,7 @@ import logging
 import numpy as np
 import pandas as pd
 
-from enclab.lrde import dwell, fit, plots, report
+from enclab.lrde import compare, dwell, fit, plots, report
 
 __all__ = ["select_channels", "analyse_lrde_log"]
 
@@ -35,7 +37,7 @@ _log = logging.getLogger(__name__)
 
 _KNOWN_SETTINGS = {"channel", "requantize", "use_truth", "rest_position", "f_hz", "n_ensembles",
                    "n_walkers", "n_steps", "n_burn", "ppc_draws", "sigma_range_steps",
-                   "sigma_prior"}
+                   "sigma_prior", "motion_models"}
 
 
 def _angle(df: pd.DataFrame, channel: dict) -> np.ndarray:
@@ -43,6 +45,31 @@ def _angle(df: pd.DataFrame, channel: dict) -> np.ndarray:
     if channel.get("storage") == "counts":
         return values.astype(float) * float(channel["step"])
     return values.astype(float)
+
+
+def _sampler_settings(settings: dict) -> dict:
+    return {"n_ensembles": int(settings.get("n_ensembles", 4)),
+            "n_walkers": int(settings.get("n_walkers", 32)),
+            "n_steps": int(settings.get("n_steps", 250)),
+            "n_burn": int(settings.get("n_burn", 250)),
+            "sigma_range": settings.get("sigma_range_steps"),
+            "sigma_prior": settings.get("sigma_prior", "uniform")}
+
+
+def _compare_models(t, counts, step, seed, settings, sine_fit) -> dict:
+    candidates = [tuple(c) for c in settings.get("motion_models", [[], [2], [3]])]
+    if len(candidates) < 2:
+        return report.motion_model_block(None, "motion_models lists fewer than two models")
+    if candidates[0] != ():
+        candidates = [()] + [c for c in candidates if c != ()]
+    try:
+        comparison = compare.compare_motion_models(
+            t, counts, step, seed, candidates=candidates, f_hz=settings.get("f_hz"),
+            sine_fit=sine_fit, **_sampler_settings(settings))
+    except ValueError as err:
+        _log.warning("motion models not compared: %s", err)
+        return report.motion_model_block(None, str(err))
+    return report.motion_model_block(comparison)
 
 
 def select_channels(df: pd.DataFrame, meta: dict, settings: dict):
@@ -139,23 +166,19 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict):
     cycles = dwell.cycle_table(counts, t, step, f_hz=f_hz)
     summary = dwell.dwell_summary(cycles)
     root = np.random.SeedSequence(seed)
-    fit_seed, ppc_seed = root.spawn(2)
+    fit_seed, ppc_seed, compare_seed = root.spawn(3)
     result = fit.fit_sinusoid(
-        t, counts, step, fit_seed,
-        n_ensembles=int(settings.get("n_ensembles", 4)),
-        n_walkers=int(settings.get("n_walkers", 32)),
-        n_steps=int(settings.get("n_steps", 250)),
-        n_burn=int(settings.get("n_burn", 250)),
-        f_hz=f_hz,
+        t, counts, step, fit_seed, f_hz=f_hz,
         truth=truth if settings.get("use_truth", True) else None,
-        rest_position=settings.get("rest_position"),
-        sigma_range=settings.get("sigma_range_steps"),
-        sigma_prior=settings.get("sigma_prior", "uniform"),
-    )
+        rest_position=settings.get("rest_position"), **_sampler_settings(settings))
     # The wall time goes to the log, not the block: summary.json must be byte-reproducible.
     _log.info("emcee fit: %.1f s wall, acceptance %.2f", result.wall_time_s, result.acceptance)
     block = report.summary_block(result, summary)
     block["channels"] = info
+    block["motion_model"] = _compare_models(t, counts, step, compare_seed, settings, result)
+    residuals = report.residuals_block(block["motion_model"])
+    if residuals is not None:
+        block["residuals"] = residuals
     predictive = plots.posterior_predictive_dwell(result, t, ppc_seed,
                                                   n_draws=int(settings.get("ppc_draws", 40)))
     truth_periods = None

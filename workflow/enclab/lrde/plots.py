@@ -33,9 +33,10 @@ def corner_plot(fit, truths: dict | None = None) -> Figure:
     truths : dict, optional
         True values (SI) by parameter name, drawn as lines (simulated data).
     """
-    scale = np.array([_DEG, _DEG, 1.0, 1.0, _DEG])
+    extra = fit.param_names[5:]
+    scale = np.array([_DEG, _DEG, 1.0, 1.0, _DEG] + [_DEG] * len(extra))
     labels = [r"$A_{12}$ [deg]", r"$E_b$ [deg]", r"$f$ [Hz]", r"phase [rad]",
-              r"$\sigma$ [deg]"]
+              r"$\sigma$ [deg]"] + [f"${name[0]}_{{{name[1:]}}}$ [deg]" for name in extra]
     data = fit.samples * scale
     truth_values = None
     if truths is not None:
@@ -65,10 +66,10 @@ def posterior_predictive_dwell(fit, t, seed, n_draws=40) -> pd.DataFrame:
     idx = rng.choice(fit.samples.shape[0], size=n_draws, replace=False)
     frames = []
     for d, i in enumerate(idx):
-        A12, E_b, f_hz, phase, sigma = fit.samples[i]
+        row = fit.samples[i]
+        E_b, f_hz, sigma = row[1], row[2], row[4]
         a_eq = (fit.centre_count + 0.5) * fit.step + E_b
-        theta = 0.5 * A12 * np.sin(2 * np.pi * f_hz * (t - fit.t_ref) + phase)
-        theta = theta + rng.normal(0.0, sigma, t.size)
+        theta = fit.motion(t, row) + rng.normal(0.0, sigma, t.size)
         counts = model.encoder_counts(theta, fit.step, a_eq)
         table = dwell.cycle_table(counts, t, fit.step, f_hz=float(f_hz))
         frames.append(pd.DataFrame({"draw": d, "cycle": table["cycle"], "w1": table["w1"],

@@ -9,7 +9,10 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["summary_block", "report_markdown", "batch_rows"]
+import numpy as np
+
+__all__ = ["summary_block", "motion_model_block", "residuals_block", "report_markdown",
+           "batch_rows"]
 
 _NOT_CONVERGED = "NOT converged (R-hat > 1.01 or ESS < 1000)"
 
@@ -84,6 +87,72 @@ def summary_block(fit, dwell: dict) -> dict:
     return block
 
 
+def motion_model_block(comparison: dict | None, reason: str | None = None) -> dict:
+    """The ``motion_model`` entry of the ``lrde`` block from
+    :func:`enclab.lrde.compare.compare_motion_models` (or why it was not run).
+
+    Keys: ``models`` (per candidate: ``harmonics``, held-out ``elpd``, ``elpd_per_cycle``,
+    ``delta_elpd``, ``delta_se``, ``z``), ``n_cycles``, ``chosen``, ``rule``, ``delta_bic``,
+    ``harmonics`` (per chosen order ``k``: ``c``, ``s`` and ``amplitude = hypot(c, s)``, each
+    ``{median, q05, q95}`` in rad) and ``A12_fundamental`` (twice the fundamental's amplitude
+    in the chosen model), or ``reason`` when no comparison was made.
+    """
+    if comparison is None:
+        return {"models": [], "chosen": [], "reason": reason}
+    out = {k: comparison[k] for k in ("models", "n_cycles", "chosen", "rule")}
+    out["delta_bic"] = _num(comparison["delta_bic"])
+    out["models"] = [{k: (_num(v) if isinstance(v, float) else v) for k, v in m.items()}
+                     for m in comparison["models"]]
+    chosen_fit = comparison.get("fit")
+    if chosen_fit is not None:
+        names = list(chosen_fit.param_names)
+        harmonics = {}
+        for k in chosen_fit.harmonics:
+            c = chosen_fit.samples[:, names.index(f"c{k}")]
+            s = chosen_fit.samples[:, names.index(f"s{k}")]
+            harmonics[str(k)] = {"c": _triple(chosen_fit.summary[f"c{k}"]),
+                                 "s": _triple(chosen_fit.summary[f"s{k}"]),
+                                 "amplitude": _quantile_triple(np.hypot(c, s))}
+        out["harmonics"] = harmonics
+        out["A12_fundamental"] = _triple(chosen_fit.summary["A12"])
+        out["converged"] = bool(chosen_fit.converged)
+    return out
+
+
+def residuals_block(motion: dict) -> dict | None:
+    """DESIGN's ``residuals`` block for a low-resolution log, from its ``motion_model``.
+
+    The metric is the held-out log predictive density per cycle (nats; higher is better):
+    ``before`` for the paper's sinusoid, ``after`` for the chosen model; one effect
+    ``harmonic_distortion`` per chosen order with its ``c``, ``s`` (rad) and 90 % intervals.
+    None when no comparison was made.
+    """
+    models = motion.get("models") or []
+    if not models:
+        return None
+    chosen = next(m for m in models if m["harmonics"] == motion["chosen"])
+    effects = []
+    for k, h in (motion.get("harmonics") or {}).items():
+        effects.append({
+            "name": "harmonic_distortion",
+            "params": {"order": int(k), "c": h["c"]["median"], "s": h["s"]["median"],
+                       "amplitude": h["amplitude"]["median"]},
+            "ci": {"c": [h["c"]["q05"], h["c"]["q95"]], "s": [h["s"]["q05"], h["s"]["q95"]],
+                   "amplitude": [h["amplitude"]["q05"], h["amplitude"]["q95"]]},
+            "delta_bic": motion.get("delta_bic"),
+            "delta_elpd": chosen["delta_elpd"], "delta_elpd_se": chosen["delta_se"],
+        })
+    return {"metric": "held-out log predictive density per cycle (nats, higher is better; "
+                      "two-fold by halves)",
+            "before": models[0]["elpd_per_cycle"], "after": chosen["elpd_per_cycle"],
+            "effects": effects}
+
+
+def _quantile_triple(x):
+    q05, q50, q95 = np.quantile(x, [0.05, 0.5, 0.95])
+    return {"median": float(q50), "q05": float(q05), "q95": float(q95)}
+
+
 def _fmt_deg(d):
     if d is None or d.get("median") is None:
         return "not identified"
@@ -124,7 +193,38 @@ def report_markdown(block: dict, log_id: str | None = None) -> str:
     lines += ["", f"Sampler diagnostics: max split R-hat {diag['rhat_max']:.4f}, min ESS "
               f"{diag['ess_min']:.0f}, max tau {diag['tau_max']:.1f} steps -> "
               f"{'converged' if diag['converged'] else _NOT_CONVERGED}."]
+    lines += _motion_model_lines(block.get("motion_model"))
     return "\n".join(lines) + "\n"
+
+
+def _motion_model_lines(motion: dict | None) -> list[str]:
+    if not motion:
+        return []
+    lines = ["", "## What the sinusoid misses: motion models on held-out data", ""]
+    if not motion.get("models"):
+        return lines + [f"Not compared: {motion.get('reason')}."]
+    deg = 180.0 / math.pi
+    lines += ["| model | held-out elpd per cycle [nats] | gain over the sinusoid | z |",
+              "|---|---|---|---|"]
+    for m in motion["models"]:
+        name = ("sinusoid (paper 002)" if not m["harmonics"] else
+                "sinusoid + harmonic " + ", ".join(str(k) for k in m["harmonics"]))
+        gain = (f"{m['delta_elpd']:.1f} +- {m['delta_se']:.1f}" if m["harmonics"] else "-")
+        z = f"{m['z']:.1f}" if m.get("z") is not None else "-"
+        lines.append(f"| {name} | {m['elpd_per_cycle']:.3f} | {gain} | {z} |")
+    lines += ["", f"Rule: {motion['rule']}."]
+    if not motion["chosen"]:
+        lines.append("Result: no candidate predicts the held-out readings better than the "
+                     "sinusoid; the paper's model stands.")
+        return lines
+    for k, h in motion["harmonics"].items():
+        lines.append(f"Result: harmonic {k} of the motion, amplitude {_fmt_deg(h['amplitude'])}"
+                     f" (c = {_fmt_deg(h['c'])}, s = {_fmt_deg(h['s'])}).")
+    fund = motion["A12_fundamental"]
+    lines.append(f"With it the fundamental's stroke is {fund['median'] * deg:.4f} deg (90 %: "
+                 f"{fund['q05'] * deg:.4f} .. {fund['q95'] * deg:.4f}); delta BIC "
+                 f"{motion['delta_bic']:.1f} (positive favours the model).")
+    return lines
 
 
 _BATCH_QUANTITIES = (("A12", "rad"), ("E_b", "rad"), ("a_eq", "rad"), ("offset_a", "rad"),

@@ -68,7 +68,7 @@ def _frame(t, counts, theta, truth_step) -> pd.DataFrame:
 
 def open_loop_log(rng, step=ROS_DRILL_STEP, A12=ROS_DRILL_A12, bias=0.0, f_hz=20.0,
                   fs_hz=2000.0, n_cycles=20, offset_frac=None, noise_std=0.0,
-                  truth_step=None):
+                  truth_step=None, distortion=None):
     """A sinusoid ``theta = bias + A12/2 sin(2 pi f t + phase)`` read by the offset encoder.
 
     Parameters
@@ -94,6 +94,9 @@ def open_loop_log(rng, step=ROS_DRILL_STEP, A12=ROS_DRILL_A12, bias=0.0, f_hz=20
     truth_step : float or None
         When given, a fine rounding encoder of this step also reads ``theta``
         (column ``truth_counts``).
+    distortion : dict, optional
+        Harmonic distortion of the motion, ``{k: (c_k, s_k)}`` (rad): adds
+        ``c_k cos(k phi) + s_k sin(k phi)`` with ``phi = 2 pi f t + phase``.
 
     Returns
     -------
@@ -118,13 +121,16 @@ def open_loop_log(rng, step=ROS_DRILL_STEP, A12=ROS_DRILL_A12, bias=0.0, f_hz=20
     phase = float(rng.uniform(-np.pi, np.pi))
     t = _time_base(f_hz, fs_hz, n_cycles)
     theta = model.sinusoid(t, A12, bias, f_hz, phase)
+    for k, (c_k, s_k) in (distortion or {}).items():
+        phi = k * (2.0 * np.pi * f_hz * t + phase)
+        theta = theta + c_k * np.cos(phi) + s_k * np.sin(phi)
     if noise_std > 0:
         theta = theta + rng.normal(0.0, noise_std, t.size)
     counts = model.encoder_counts(theta, step, a)
     params = {"step": step, "A12": A12, "bias": float(bias), "f_hz": f_hz, "phase": phase,
               "fs_hz": fs_hz, "offset_a": a, "a_eq": a + bias, "E_b": a + bias - 0.5 * step,
               "noise_std": float(noise_std), "truth_step": truth_step,
-              "n_cycles": n_cycles}
+              "n_cycles": n_cycles, "distortion": dict(distortion or {})}
     return _frame(t, counts, theta, truth_step), params
 
 

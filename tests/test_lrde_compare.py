@@ -1,0 +1,78 @@
+"""Held-out comparison of LRDE motion models (sinusoid vs harmonic distortion)."""
+import numpy as np
+import pytest
+
+from enclab.lrde import compare, fit, report, simulate
+
+STEP = simulate.ROS_DRILL_STEP
+SAMPLER = {"n_ensembles": 2, "n_walkers": 24, "n_steps": 150, "n_burn": 150}
+
+
+def _log(seed, distortion=None, n_cycles=16):
+    return simulate.open_loop_log(np.random.default_rng(seed), A12=3.7 * STEP,
+                                  bias=0.15 * STEP, offset_frac=0.35, n_cycles=n_cycles,
+                                  noise_std=0.005 * STEP, distortion=distortion)
+
+
+def test_simulated_distortion_is_added_to_the_motion():
+    clean, p = _log(1, n_cycles=2)
+    df, p2 = _log(1, distortion={3: (0.2 * STEP, 0.0)}, n_cycles=2)
+    assert p2["distortion"] == {3: (0.2 * STEP, 0.0)}
+    # Same draws, so the readings differ only where cos(3 phi) moves a level crossing.
+    assert (df["counts"] != clean["counts"]).any()
+    assert p2["phase"] == p["phase"]
+
+
+def test_pointwise_log_likelihood_sums_to_the_fit_likelihood():
+    df, _ = _log(2, n_cycles=4)
+    t, c = df["t"].to_numpy(), df["counts"].to_numpy()
+    r = fit.fit_sinusoid(t, c, STEP, seed=0, harmonics=(3,), **dict(SAMPLER, n_steps=60,
+                                                                     n_burn=20))
+    sub = fit.FitResult(**{**r.__dict__, "samples": r.samples[:5]})
+    pointwise = compare.pointwise_log_likelihood(sub, t, c)
+    internal = fit._to_internal(r.samples[:5], STEP)
+    direct = fit.log_likelihood(internal, t, c, STEP, r.centre_count, r.t_ref,
+                                harmonics=(3,))
+    np.testing.assert_allclose(pointwise.sum(axis=1), direct, rtol=1e-10)
+
+
+@pytest.mark.slow
+def test_clean_sinusoid_keeps_the_paper_model_and_distortion_is_found():
+    df, _ = _log(7)
+    t, c = df["t"].to_numpy(), df["counts"].to_numpy()
+    out = compare.compare_motion_models(t, c, STEP, 1, candidates=((), (3,)), **SAMPLER)
+    assert out["chosen"] == [] and out["fit"] is None and out["delta_bic"] is None
+    block = report.motion_model_block(out)
+    res = report.residuals_block(block)
+    assert res["effects"] == [] and res["before"] == res["after"]
+
+    # A third harmonic of 0.05 step (0.0045 deg, 1.4 % of the stroke) on the same motion.
+    c3, s3 = 0.05 * STEP, 0.015 * STEP
+    df, _ = _log(7, distortion={3: (c3, s3)})
+    t, c = df["t"].to_numpy(), df["counts"].to_numpy()
+    out = compare.compare_motion_models(t, c, STEP, 1, candidates=((), (2,), (3,)), **SAMPLER)
+    assert out["chosen"] == [3]
+    by_order = {tuple(m["harmonics"]): m for m in out["models"]}
+    assert by_order[(3,)]["z"] > 2 and by_order[(3,)]["delta_elpd"] > by_order[(2,)]["delta_elpd"]
+    assert out["delta_bic"] > 0
+    block = report.motion_model_block(out)
+    amp = block["harmonics"]["3"]["amplitude"]
+    # The amplitude's interval is a few hundredths of a step wide; it must hold the truth to
+    # within that width (one seeded draw, not a coverage statement).
+    width = amp["q95"] - amp["q05"]
+    assert abs(amp["median"] - np.hypot(c3, s3)) < 1.5 * width
+    res = report.residuals_block(block)
+    assert res["after"] > res["before"]
+    assert res["effects"][0]["name"] == "harmonic_distortion"
+    assert res["effects"][0]["params"]["order"] == 3
+
+
+def test_compare_validates():
+    df, _ = _log(3, n_cycles=3)
+    t, c = df["t"].to_numpy(), df["counts"].to_numpy()
+    with pytest.raises(ValueError, match="start with"):
+        compare.compare_motion_models(t, c, STEP, 0, candidates=((3,), ()))
+    with pytest.raises(ValueError, match="harmonics"):
+        fit.fit_sinusoid(t, c, STEP, seed=0, harmonics=(1,))
+    with pytest.raises(ValueError, match="halves"):
+        compare.compare_motion_models(t[:150], c[:150], STEP, 0, **SAMPLER)
