@@ -8,7 +8,8 @@ from matplotlib.figure import Figure
 from enclab.lrde import dwell, fit, model, pipeline, plots, report, simulate
 
 STEP = simulate.ROS_DRILL_STEP
-FAST = {"n_ensembles": 2, "n_walkers": 16, "n_steps": 120, "n_burn": 80, "ppc_draws": 8}
+FAST = {"n_ensembles": 2, "n_walkers": 16, "n_steps": 120, "n_burn": 80, "ppc_draws": 8,
+        "motion_models": [[], [3]]}
 
 
 def _canonical(seed=21, with_measured=True):
@@ -41,6 +42,12 @@ def test_analyse_lrde_log_block_matches_design_contract():
     assert set(figures) == {"corner", "dwell_ppc", "bias_cycles"}
     assert all(isinstance(f, Figure) for f in figures.values())
     assert "stroke A12" in md and "Sampler diagnostics" in md
+    # The held-out motion-model comparison ran (a clean sinusoid: compare.py's own tests check
+    # which model wins) and fills DESIGN's residuals block.
+    motion = block["motion_model"]
+    assert [m["harmonics"] for m in motion["models"]] == [[], [3]]
+    assert set(block["residuals"]) == {"metric", "before", "after", "effects"}
+    assert "What the sinusoid misses" in md
     assert list(cycles.columns) == dwell.CYCLE_COLUMNS and len(cycles) >= 3
 
 
