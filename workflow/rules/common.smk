@@ -39,7 +39,13 @@ if config.get("only_logs"):
 
 
 def _stages(entry):
-    return (entry.get("analysis") or {}).get("stages", ["quantization"])
+    stages = (entry.get("analysis") or {}).get("stages")
+    if stages is None:
+        # A truth/measured pair and nothing else declared (a plain CSV) runs the residual stage
+        # alone: re-quantizing needs the truth's grid or explicit steps, so quantization is
+        # asked for by name on such a log. Without a pair the default stays quantization.
+        stages = ["residuals"] if enclab_residual_pairs(entry) else ["quantization"]
+    return stages
 
 
 LOG_IDS = sorted(ENTRIES)
@@ -97,7 +103,7 @@ def device_of(wildcards):
 
 
 def summary_inputs(wildcards):
-    """summary.json merges the blocks of the stages a log runs (quantization and/or lrde)."""
+    """summary.json merges the blocks of the stages a log runs (quantization, lrde, residuals)."""
     log_id = wildcards.log_id
     inputs = {"canonical": f"results/{log_id}/canonical.parquet"}
     if log_id in QUANT_IDS:

@@ -142,6 +142,11 @@ def residual_floor(step: float, truth_step: float | None = None) -> dict:
     ``P(r != 0) = truth_step / (4 step)``, mean 0, ``std = sqrt(step * truth_step / 4)``
     (valid for ``truth_step <= step``). A continuous truth gives a floor of 0.
 
+    Nested grids (``step`` an integer multiple of ``truth_step``, e.g. a channel re-quantized
+    from the truth) fix where the measured transitions sit in the truth's cells, so ``P(r != 0)``
+    is ``|d| / step`` for their distance ``d`` from a truth cell boundary, between 0 and
+    ``truth_step / (2 step)``; the value returned is its average over ``d``.
+
     Returns
     -------
     dict
