@@ -48,7 +48,7 @@ def test_error_moments_histogram_and_mass_outside():
     # var(e) = (step^2 + truth_step^2)/12; the sample variance of a bounded uniform-like
     # variable has relative sd sqrt(0.8/N) (kurtosis 1.8 of the uniform).
     assert np.std(e) == pytest.approx(dg.error_floor_std(STEP, TRUTH_STEP), rel=4 * math.sqrt(0.8 / N) / 2)
-    h = dg.histogram(e, STEP, TRUTH_STEP, n_bins=40)
+    h = dg.histogram(e, STEP, TRUTH_STEP, n_bins=40, span_steps=1.5)
     p_out = dg.predicted_mass_outside(STEP, TRUTH_STEP)
     assert h["mass_outside_predicted"] == pytest.approx(TRUTH_STEP / (4 * STEP))
     assert h["mass_outside"] == pytest.approx(p_out, abs=4 * math.sqrt(p_out / N))
@@ -128,7 +128,7 @@ def test_angle_mod_2pi_recovers_eccentricity():
     rng = np.random.default_rng(22)
     n = 400_000
     t = np.arange(n) / 1000.0
-    theta = rng.uniform(0, 2 * np.pi, n)  # many revolutions' worth of phases
+    theta = rng.uniform(0, 4 * np.pi, n)  # two revolutions' worth of phases
     eps = 2.0 * STEP
     truth = TRUTH_STEP * quantize(theta, TRUTH_STEP).astype(float)
     measured = STEP * quantize(theta + eps * np.sin(theta), STEP).astype(float)

@@ -109,7 +109,9 @@ def test_summary_block_and_batch_rows(analysed):
     assert list(block["channels"]) == ["measured", "other"]
     rows = pipeline.batch_rows({"log_id": "x", "residuals": block})
     assert [r["measured"] for r in rows] == ["measured", "other"]
-    assert rows[0]["effects"].startswith("backlash(")
+    assert rows[0]["effects"].startswith("backlash(w=") and "dBIC=" in rows[0]["effects"]
+    w_ci = block["effects"][0]["ci"]["w"]
+    assert f"[{w_ci[0]:.4g}, {w_ci[1]:.4g}]" in rows[0]["effects"]
     assert pipeline.summary_block([]) is None
     assert pipeline.batch_rows({"log_id": "y"}) == []
 

@@ -192,8 +192,11 @@ def moments(x) -> dict:
 
 
 def histogram(error, step: float, truth_step: float | None = None, n_bins: int = 41,
-              span_steps: float = 1.5) -> dict:
+              span_steps: float | None = None) -> dict:
     """Histogram of the error (density) next to the predicted density.
+
+    ``span_steps`` is the half-width of the histogram in steps; ``None`` covers 99.9 % of the
+    samples and at least 1.5 steps (at most 200).
 
     Returns
     -------
@@ -205,6 +208,8 @@ def histogram(error, step: float, truth_step: float | None = None, n_bins: int =
     """
     step = _step("step", step)
     (error,) = _arrays(error, names=("error",))
+    if span_steps is None:
+        span_steps = float(np.clip(np.quantile(np.abs(error), 0.999) / step + 0.5, 1.5, 200.0))
     edges = np.linspace(-span_steps * step, span_steps * step, n_bins + 1)
     counts, _ = np.histogram(error, bins=edges)
     width = np.diff(edges)
@@ -290,8 +295,8 @@ def conditioned(t, truth, measured_counts, r, *, n_bins: int = 24, line_pitch: f
     Returns
     -------
     dict
-        ``angle_mod_2pi``, ``angle_mod_pitch``, ``count_mod_4``, ``velocity``, ``time``
-        (each a :func:`binned` result) and ``velocity_sign`` (:func:`velocity_sign`).
+        ``angle_mod_2pi`` (the angle wrapped to ``[-pi, pi)``), ``angle_mod_pitch`` (in
+        pitches), ``count_mod_4``, ``velocity``, ``time`` (each a :func:`binned` result) and ``velocity_sign`` (:func:`velocity_sign`).
     """
     t, truth, r = _arrays(t, truth, r, names=("t", "truth", "r"))
     line_pitch = _step("line_pitch", line_pitch)
@@ -300,7 +305,8 @@ def conditioned(t, truth, measured_counts, r, *, n_bins: int = 24, line_pitch: f
         raise ValueError(f"measured_counts has shape {counts.shape}, r has {r.shape}")
     v = velocity(t, truth)
     return {
-        "angle_mod_2pi": binned(np.mod(truth, 2 * np.pi), r, np.linspace(0, 2 * np.pi, n_bins + 1)),
+        "angle_mod_2pi": binned(np.mod(truth + np.pi, 2 * np.pi) - np.pi, r,
+                                np.linspace(-np.pi, np.pi, n_bins + 1)),
         "angle_mod_pitch": binned(np.mod(truth, line_pitch) / line_pitch, r, np.linspace(0, 1, n_bins + 1)),
         "count_mod_4": binned(np.mod(counts, 4).astype(np.float64), r, np.arange(5) - 0.5),
         "velocity": binned(v, r, _quantile_edges(v, velocity_bins)),

@@ -34,7 +34,8 @@ from collections.abc import Callable, Mapping
 import numpy as np
 import pandas as pd
 
-__all__ = ["residual_pairs", "channel_values", "analyse_channel", "summary_block", "batch_rows"]
+__all__ = ["residual_pairs", "channel_values", "analyse_channel", "before_after_table", "format_effects",
+           "summary_block", "batch_rows"]
 
 METRIC = "std of (measured - exact-model prediction) [rad]"
 
@@ -84,6 +85,19 @@ def _settings(settings: Mapping | None) -> dict:
 
 def _effects_label(effects) -> str:
     return ", ".join(e.name for e in effects) if effects else ""
+
+
+def format_effects(effects) -> str:
+    """``"backlash(w=0.01199 [0.01198, 0.012], dBIC=4.1e+04)"`` for the summary's effect dicts
+    (parameters with their 90 % intervals)."""
+    out = []
+    for e in effects or []:
+        ci = e.get("ci") or {}
+        params = ", ".join(
+            f"{k}={v:.4g}" + (f" [{ci[k][0]:.4g}, {ci[k][1]:.4g}]" if k in ci and ci[k] is not None else "")
+            for k, v in (e.get("params") or {}).items())
+        out.append(f"{e['name']}({params}, dBIC={e.get('delta_bic', float('nan')):.3g})")
+    return "; ".join(out)
 
 
 def analyse_channel(df: pd.DataFrame, meta: Mapping, pair: Mapping, settings: Mapping | None = None,
@@ -148,7 +162,8 @@ def analyse_channel(df: pd.DataFrame, meta: Mapping, pair: Mapping, settings: Ma
     # counter's unknown zero never competes with the physical candidates.
     res = select(t, truth + offset, measured, step, truth_step=truth_step, aux=aux or None,
                  seed=int(np.random.SeedSequence(seed).generate_state(1)[0]),
-                 candidates=cfg["candidates"], alpha=float(cfg["alpha"]))
+                 candidates=cfg["candidates"], alpha=float(cfg["alpha"]),
+                 line_pitch=int(cfg["line_pitch_counts"]) * step)
     after_pred = np.asarray(res.model_prediction(t, truth + offset), dtype=np.float64)
     r_after = measured - after_pred
     v = dg.velocity(t, truth)
@@ -172,26 +187,32 @@ def analyse_channel(df: pd.DataFrame, meta: Mapping, pair: Mapping, settings: Ma
                                                   step, title=title,
                                                   effects_label=_effects_label(res.effects)),
     }
-    table = before_after_table(log_id, pair, step, diag, r_after, res)
+    table = before_after_table(log_id, pair, step, diag, r_after, res.before, res.after,
+                               selection["effects"])
     return block, figures, table
 
 
-def before_after_table(log_id, pair, step, diag, r_after, res) -> pd.DataFrame:
-    """One row per stage (exact model, with the selected effects) of one measured channel."""
+def before_after_table(log_id, pair, step, diag, r_after, lib_before, lib_after, effects) -> pd.DataFrame:
+    """One row per stage (exact model, with the selected effects) of one measured channel.
+
+    ``std``, ``mean``, ``rms``, ``max_abs`` are those of this stage's residual
+    (``measured - q(truth + c)`` before, ``measured - model_prediction`` after); ``floor_std``
+    and its interval are the effect library's (``SelectionResult.before/after``); ``effects``
+    lists the selected effects with their 90 % intervals.
+    """
     from enclab.residuals import diagnostics as dg
 
     rows = []
-    for stage, r, lib in (("before", diag["residual"], res.before), ("after", r_after, res.after)):
+    for stage, r, lib in (("before", diag["residual"], lib_before), ("after", r_after, lib_after)):
         m = dg.moments(r)
         floor = lib.get("floor_std", diag["floor"]["residual_std"])
         ci = lib.get("floor_ci") or (None, None)
         rows.append({"log_id": log_id, "measured": pair["measured"], "truth": pair["truth"],
-                     "stage": stage, "effects": _effects_label(res.effects) if stage == "after" else "",
-                     "std": m["std"], "mean": m["mean"], "rms": m["rms"], "max_abs": m["max_abs"],
-                     "std_steps": m["std"] / step, "floor_std": floor,
+                     "stage": stage, "std": m["std"], "mean": m["mean"], "rms": m["rms"],
+                     "max_abs": m["max_abs"], "std_steps": m["std"] / step, "floor_std": floor,
                      "floor_ci_lo": ci[0], "floor_ci_hi": ci[1],
                      "std_over_floor": m["std"] / floor if floor else None,
-                     "library_std": lib.get("std")})
+                     "effects": format_effects(effects) if stage == "after" else ""})
     return pd.DataFrame(rows)
 
 
@@ -230,9 +251,7 @@ def batch_rows(summary: Mapping) -> list[dict]:
             "before_std": before.get("std"), "after_std": after.get("std"), "floor_std": floor,
             "after_over_floor": (after.get("std") / floor) if floor and after.get("std") is not None else None,
             "explained": sel.get("explained"),
-            "effects": "; ".join(
-                f"{e['name']}(" + ", ".join(f"{k}={v:.4g}" for k, v in (e.get("params") or {}).items()) + ")"
-                for e in effects),
+            "effects": format_effects(effects),
             "message": sel.get("message"),
         })
     return rows

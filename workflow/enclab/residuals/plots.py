@@ -95,7 +95,7 @@ def diagnostics_figure(t, truth, diag: Mapping, step: float, *, title: str = "",
     ax.set_ylabel("PSD [step^2/Hz]")
     ax.set_title("residual spectrum (Welch)", fontsize=9)
 
-    _binned_panel(axes[1, 0], cond["angle_mod_2pi"], scale, "truth mod 2 pi [deg]",
+    _binned_panel(axes[1, 0], cond["angle_mod_2pi"], scale, "truth mod 2 pi, wrapped [deg]",
                   "residual vs angle mod 2 pi", xscale=_DEG)
     _binned_panel(axes[1, 1], cond["angle_mod_pitch"], scale, "truth mod line pitch [pitch]",
                   "residual vs angle mod line pitch")
