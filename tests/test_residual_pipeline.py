@@ -150,3 +150,33 @@ def test_plain_csv_one_entry_manifest_end_to_end(tmp_path):
     batch = pd.read_csv(tmp_path / "results/batch/residuals.csv")
     assert list(batch["log_id"]) == ["rig"] and batch["after_std"][0] < batch["before_std"][0]
     assert (tmp_path / "logs/rig.csv").read_bytes() == raw
+
+
+REAL = ROOT.parent / "shared" / "data" / "real"
+
+
+@pytest.mark.shared
+@pytest.mark.skipif(not REAL.is_dir(), reason=f"real logs not available ({REAL} is absent)")
+def test_mrdlab_output_encoder_lags_the_motor_in_the_direction_of_motion():
+    from enclab import io
+    from enclab.residuals import diagnostics as dg
+
+    devices = yaml.safe_load((ROOT / "config.yaml").read_text())["devices"]
+    data_root, entries = io.read_manifest(ROOT / "data/manifest.real.yaml", devices)
+    entry = next(e for e in entries if e["id"] == "mrdlab_0p5hz")
+    df, meta = io.ingest_log(entry, ROOT / data_root, devices)
+    assert pipeline.residual_pairs(meta) == [
+        {"measured": "theta_cui", "truth": "theta_motor", "joint": 1},
+        {"measured": "theta_front", "truth": "theta_motor", "joint": 1}]
+    t = df["t"].to_numpy()
+    truth, truth_step = pipeline.channel_values(df, meta, "theta_motor")
+    cui, step = pipeline.channel_values(df, meta, "theta_cui")
+    torque = pipeline.channel_values(df, meta, "torque_back")[0]
+    # Futek cell at 3.9811e-5 N m per count: a 10 % reaction torque stays within 0.1 N m.
+    assert 0.03 < np.max(np.abs(torque)) < 0.1
+    d = dg.diagnose(t, truth, cui, step, truth_step)
+    vs = d["conditioned"]["velocity_sign"]
+    # PROVENANCE.md / earlier measurement: +0.0149 / -0.0124 rad by direction (~0.027 rad).
+    assert vs["forward"]["mean"] < -0.01 and vs["backward"]["mean"] > 0.01
+    assert -0.03 < vs["difference"] < -0.02
+    assert d["residual_moments"]["std"] > 50 * d["floor"]["residual_std"]
