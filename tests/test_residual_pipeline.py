@@ -180,3 +180,26 @@ def test_mrdlab_output_encoder_lags_the_motor_in_the_direction_of_motion():
     assert vs["forward"]["mean"] < -0.01 and vs["backward"]["mean"] > 0.01
     assert -0.03 < vs["difference"] < -0.02
     assert d["residual_moments"]["std"] > 50 * d["floor"]["residual_std"]
+
+
+def test_compliance_against_an_aux_torque_channel():
+    table = _two_channel(31, 0.0, n=4000)
+    rng = np.random.default_rng(32)
+    t = table["t"].to_numpy()
+    torque = 0.05 * np.sin(2 * np.pi * 0.37 * t + 1.0) + 0.002 * rng.normal(size=t.size)
+    kappa = 0.1  # rad per N m: 0.005 rad = 2.2 steps at the peak torque
+    table["measured"] = OUT_STEP * quantize(table["truth"] + kappa * torque, OUT_STEP).astype(float)
+    df, meta = _canonical(table)
+    df["torque"] = torque
+    meta["channels"].append({"name": "torque", "role": "aux", "joint": None, "storage": "float",
+                             "step": None})
+    block, _, table_out = pipeline.analyse_channel(
+        df, meta, {"measured": "measured", "truth": "truth"}, {"aux": {"torque": "torque"}})
+    names = [e["name"] for e in block["selection"]["effects"]]
+    assert names[:1] == ["compliance"]
+    lo, hi = block["selection"]["effects"][0]["ci"]["kappa"]
+    # One seeded draw: the 90 % interval of the library covers the value set (coverage rates
+    # are the challenge benchmark's business).
+    assert lo < kappa < hi
+    std = table_out.set_index("stage")["std"]
+    assert std["after"] < 0.5 * std["before"]

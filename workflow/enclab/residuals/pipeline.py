@@ -164,7 +164,9 @@ def analyse_channel(df: pd.DataFrame, meta: Mapping, pair: Mapping, settings: Ma
                  seed=int(np.random.SeedSequence(seed).generate_state(1)[0]),
                  candidates=cfg["candidates"], alpha=float(cfg["alpha"]),
                  line_pitch=int(cfg["line_pitch_counts"]) * step)
-    after_pred = np.asarray(res.model_prediction(t, truth + offset), dtype=np.float64)
+    # On the log the selection ran on (its truth, aux channels and counts, so that effects
+    # needing the torque or the measured counts are included).
+    after_pred = np.asarray(res.model_prediction(), dtype=np.float64)
     r_after = measured - after_pred
     v = dg.velocity(t, truth)
     after_diag = {"residual": dg.moments(r_after), "velocity_sign": dg.velocity_sign(v, r_after)}
