@@ -76,7 +76,7 @@ def _selector() -> Callable:
 def _settings(settings: Mapping | None) -> dict:
     out = {"offset": "fit", "line_pitch_counts": 4, "n_bins": 24, "alpha": 0.01, "candidates": None,
            "aux": {}, "seed": 0, "step": None}
-    unknown = set(settings or {}) - set(out) - {"enabled"}
+    unknown = set(settings or {}) - set(out)
     if unknown:
         raise ValueError(f"residuals settings: unknown key(s) {sorted(unknown)}; expected {sorted(out)}")
     out.update(settings or {})
