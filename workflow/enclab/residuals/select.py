@@ -65,7 +65,6 @@ import numpy as np
 from scipy import optimize, signal, stats
 from scipy.special import log_ndtr, ndtr
 
-from enclab.lrde.fit import _log_interval_prob  # the tail-accurate log(Phi(b) - Phi(a))
 from enclab.residuals import effects as fx
 
 __all__ = ["select_effects", "SelectionResult", "FittedEffect", "residual_stats", "estimate_grid_step"]
@@ -158,7 +157,8 @@ class _Model:
         priv["_offset"] = x[0]
         aux = {**ctx.aux, **priv}
         theta = ctx.truth
-        var = np.full(ctx.n, priv["_truth_var"] / ctx.step**2 + (10.0 ** x[1]) ** 2)
+        # s is the Gaussian part only; the truth channel's uniform error enters _loglik_terms
+        var = np.full(ctx.n, (10.0 ** x[1]) ** 2)
         for e, sl in zip(self.effects, self.slices):
             p = x[sl]
             if e.kind == "noise":
@@ -189,16 +189,92 @@ class _Model:
         return dict(zip(e.param_names, (float(v) for v in x[sl])))
 
 
+def _log_interval_prob(lower, upper):
+    """``log(Phi(upper) - Phi(lower))`` for ``lower < upper``, accurate in both tails and for
+    narrow intervals far out (no one-bound shortcut: the density of the uniform-plus-Gaussian
+    law needs intervals of width ``2 h / s`` many sigmas out)."""
+    flip = lower > 0
+    lo, up = np.where(flip, -upper, lower), np.where(flip, -lower, upper)
+    log_up = log_ndtr(up)
+    with np.errstate(divide="ignore"):
+        return log_up + np.log1p(-np.exp(np.minimum(log_ndtr(lo) - log_up, 0.0)))
+
+
+def _log_g(u):
+    """log of ``G(u) = u Phi(u) + phi(u)`` (the integral of Phi), accurate for u << 0."""
+    u = np.asarray(u, dtype=float)
+    out = np.empty_like(u)
+    deep = u < -10.0
+    ud = u[deep]
+    inv = 1.0 / (ud * ud)
+    # asymptotic series G(u) = phi(u) / u^2 (1 - 3/u^2 + 15/u^4 - 105/u^6 + 945/u^8), rel. err < 1e-7
+    out[deep] = (-0.5 * ud * ud - _LOG_SQRT_2PI - np.log(ud * ud)
+                 + np.log1p(inv * (-3.0 + inv * (15.0 + inv * (-105.0 + 945.0 * inv)))))
+    us = u[~deep]
+    with np.errstate(divide="ignore"):
+        out[~deep] = np.log(us * ndtr(us) + np.exp(-0.5 * us * us - _LOG_SQRT_2PI))
+    return out
+
+
+def _log_cdf_neg(x, half, sigma):
+    """log P(U + N < x) for ``x <= 0``, U ~ uniform(-half, half), N ~ N(0, sigma^2)."""
+    u1, u2 = (x + half) / sigma, (x - half) / sigma
+    g1, g2 = _log_g(u1), _log_g(u2)
+    with np.errstate(divide="ignore"):
+        return np.log(sigma / (2.0 * half)) + g1 + np.log1p(-np.exp(np.minimum(g2 - g1, 0.0)))
+
+
+def _log_interval_ug(a, b, half, sigma):
+    """log P(a <= U + N < b), ``a < b``, accurate in both tails (symmetry flips a > 0)."""
+    flip = a > 0
+    lo, up = np.where(flip, -b, a), np.where(flip, -a, b)
+    log_lo = _log_cdf_neg(np.minimum(lo, 0.0), half, sigma)
+    up_neg = up <= 0
+    log_up = np.where(up_neg, _log_cdf_neg(np.minimum(up, 0.0), half, sigma), 0.0)
+    # for up > 0: F(up) = 1 - F(-up)
+    pos = ~up_neg
+    if np.any(pos):
+        log_up[pos] = np.log1p(-np.exp(_log_cdf_neg(-up[pos], half, sigma[pos] if np.ndim(sigma) else sigma)))
+    with np.errstate(divide="ignore"):
+        return log_up + np.log1p(-np.exp(np.minimum(log_lo - log_up, 0.0)))
+
+
 def _loglik_terms(ctx, mu, s, idx):
+    """Per-sample log P(count | mu) and its derivatives in ``mu`` and in the jitter ``s``.
+
+    The perturbation of ``mu`` is the truth channel's uniform error (half-width
+    ``truth_step / (2 step)`` counts) plus a Gaussian of std ``s``; with no truth quantization
+    (or one far below ``s``) it is the Gaussian alone with the uniform's variance added.
+    """
     k = ctx.counts[idx].astype(float)
     m, sd = mu[idx], s[idx]
-    a, b = (k - m) / sd, (k + 1.0 - m) / sd
-    ll = _log_interval_prob(a, b)
-    # d ll / d mu and d ll / d s from phi(a), phi(b) over P, in logs for the tails
-    pa = np.exp(-0.5 * a * a - _LOG_SQRT_2PI - ll)
-    pb = np.exp(-0.5 * b * b - _LOG_SQRT_2PI - ll)
-    dmu = (pa - pb) / sd
-    ds = (a * pa - b * pb) / sd
+    a, b = k - m, k + 1.0 - m
+    half = 0.5 * ctx.truth_step / ctx.step
+    if half < 1e-3 * float(np.min(sd)):
+        sg = np.sqrt(sd * sd + half * half / 3.0)
+        az, bz = a / sg, b / sg
+        ll = _log_interval_prob(az, bz)
+        pa = np.exp(np.minimum(-0.5 * az * az - _LOG_SQRT_2PI - ll, 700.0))
+        pb = np.exp(np.minimum(-0.5 * bz * bz - _LOG_SQRT_2PI - ll, 700.0))
+        dmu = (pa - pb) / sg
+        ds = (az * pa - bz * pb) / sg * (sd / sg)
+        return ll, dmu, ds
+    ll = _log_interval_ug(a, b, half, sd)
+    log2h = math.log(2.0 * half)
+
+    def dens(x):  # log f(x), f the density of U + N
+        return _log_interval_prob((x - half) / sd, (x + half) / sd) - log2h
+
+    def ratio(logv):
+        return np.exp(np.minimum(logv - ll, 700.0))
+
+    dmu = ratio(dens(a)) - ratio(dens(b))
+
+    def dphi(x):  # (phi((x + h)/s) - phi((x - h)/s)) / (2h) / P
+        u1, u2 = (x + half) / sd, (x - half) / sd
+        return ratio(-0.5 * u1 * u1 - _LOG_SQRT_2PI - log2h) - ratio(-0.5 * u2 * u2 - _LOG_SQRT_2PI - log2h)
+
+    ds = dphi(b) - dphi(a)
     return ll, dmu, ds
 
 
