@@ -259,6 +259,18 @@ def _loglik_terms(ctx, mu, s, idx):
         dmu = (pa - pb) / sg
         ds = (az * pa - bz * pb) / sg * (sd / sg)
         return ll, dmu, ds
+    # samples whose count interval holds mu with > 10 sigma to spare on both sides have
+    # P = 1 - O(Phi(-10)) = 1 - 8e-24: log P and its derivatives are 0 to double precision
+    reach = half + 10.0 * sd
+    active = (a > -reach) | (b < reach)
+    ll, dmu, ds = np.zeros(a.size), np.zeros(a.size), np.zeros(a.size)
+    if np.any(active):
+        ll[active], dmu[active], ds[active] = _ug_terms(a[active], b[active], half, sd[active])
+    return ll, dmu, ds
+
+
+def _ug_terms(a, b, half, sd):
+    """log P(a <= U + N < b) and its derivatives in mu (= -d/da - d/db) and in sd."""
     ll = _log_interval_ug(a, b, half, sd)
     log2h = math.log(2.0 * half)
 
@@ -562,16 +574,34 @@ def estimate_grid_step(x, rtol: float = 1e-6) -> float:
 
 
 def _smoothed_velocity(t, truth, truth_step):
+    """Velocity of the truth (Savitzky-Golay, 21 samples, quadratic) and a dead zone below it.
+
+    The dead zone ``v_eps`` is where the direction is kept from the last motion (the memory of
+    hysteresis and backlash). A truth that moves without flicker (a clean quantized or smooth
+    channel) gets no dead zone: a centred filter of a monotone run never changes sign, and any
+    dead zone would delay the direction at each reversal and bias a hysteresis width. A truth
+    that flickers (more than 5 % of its moves reverse the previous one) gets a dead zone above
+    both a one-count flicker (``0.075 truth_step / dt``, the largest filter output of one
+    count) and three standard deviations of the filtered white noise (from the MAD of the
+    sample-to-sample differences).
+    """
     dt = float(np.median(np.diff(t)))
     n = truth.size
     win = min(21, n - (1 - n % 2)) if n >= 5 else 0
     if win >= 5:
         v = signal.savgol_filter(truth, win, 2, deriv=1, delta=dt)
-        # the derivative noise of a quantized truth: below it the direction is kept (memory)
-        v_eps = truth_step / (win * dt) if truth_step else 0.0
+        half = win // 2
+        sum_i2 = half * (half + 1) * (2 * half + 1) / 3.0
     else:
         v = np.gradient(truth, t)
-        v_eps = 0.0
+        sum_i2 = 0.5
+    d = np.diff(truth)
+    moves = np.sign(d[d != 0])
+    flicker = float(np.mean(moves[1:] != moves[:-1])) if moves.size > 1 else 0.0
+    if flicker <= 0.05:
+        return v, 0.0
+    sigma_n = float(np.median(np.abs(d - np.median(d)))) / 0.6745 / math.sqrt(2.0)
+    v_eps = max(0.075 * truth_step / dt, 3.0 * sigma_n / (math.sqrt(sum_i2) * dt))
     return v, v_eps
 
 
@@ -674,6 +704,7 @@ def select_effects(
     max_effects: int = 4,
     max_tries: int = 3,
     line_pitch: float | None = None,
+    stop_at_floor: bool = True,
 ) -> SelectionResult:
     """Find, fit and report the effects that explain ``measured`` against ``truth``.
 
@@ -704,6 +735,11 @@ def select_effects(
         At most this many effects; at most this many candidates confirmed per step.
     line_pitch : float, optional
         Line pitch (rad) of the line-pitch harmonics; default four measured steps.
+    stop_at_floor : bool
+        Stop as soon as the residual std is within the floor's interval (the stop rule of
+        DESIGN 2.3). The likelihood can still see an effect whose std change is inside that
+        interval; False tries the candidates anyway (the selection then ends only when none
+        passes).
 
     Returns
     -------
@@ -738,7 +774,7 @@ def select_effects(
     remaining = _candidates(ctx, candidates)
     for _ in range(max_effects):
         st = residual_stats(cur, ctx)
-        if st["std"] <= st["floor_ci"][1]:
+        if stop_at_floor and st["std"] <= st["floor_ci"][1]:
             break
         trials = []
         for cand in remaining:
