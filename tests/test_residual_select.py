@@ -191,3 +191,29 @@ def test_bad_inputs_name_the_row():
         select_effects(t, truth, meas_bad, STEP)
     with pytest.raises(ValueError, match="unknown candidate"):
         select_effects(t, truth, meas, STEP, candidates=["gremlins"])
+
+
+def test_long_log_is_fitted_on_a_subsample_with_full_statistics(monkeypatch):
+    monkeypatch.setattr(sel, "_MAX_FIT_SAMPLES", 2000)
+    log = _log(12, {"latency": {"tau": 1e-3}}, duration=6.0)
+    res = select_effects(log["t"], log["truth"], log["measured"], STEP, truth_step=TRUTH_STEP)
+    assert [e.name for e in res.effects][0] == "latency"
+    assert res.effects[0].params["tau"] == pytest.approx(1e-3, rel=0.05)
+    # the statistics are of the full log
+    assert np.std(log["measured"] - res.model_prediction()) == pytest.approx(res.after["std"])
+    assert res.model_prediction().size == log["t"].size
+
+
+def test_flickering_truth_keeps_its_direction_through_a_dwell():
+    t = np.arange(600) / 1000.0
+    ramp = np.concatenate([np.linspace(0, 0.1, 200), np.full(200, 0.1), np.linspace(0.1, 0.2, 200)])
+    truth = TRUTH_STEP * np.round(ramp / TRUTH_STEP)
+    rng = np.random.default_rng(0)
+    truth[200:400] += TRUTH_STEP * rng.integers(-1, 2, 200)  # one-count flicker while at rest
+    ctx = sel._make_ctx(t, truth, np.zeros(600, np.int64), STEP, TRUTH_STEP, {}, 0.0, None)
+    assert np.all(ctx.priv["_motion_sign"][20:580] == 1)
+    # a clean quantized truth gets no dead zone: the direction flips at the reversal itself
+    tri = TRUTH_STEP * np.round(np.concatenate([np.linspace(0, 0.1, 300), np.linspace(0.1, 0, 300)]) / TRUTH_STEP)
+    ctx = sel._make_ctx(t, tri, np.zeros(600, np.int64), STEP, TRUTH_STEP, {}, 0.0, None)
+    flip = np.flatnonzero(np.diff(ctx.priv["_motion_sign"]) != 0)
+    assert flip.size == 1 and abs(int(flip[0]) - 299) <= 2

@@ -27,6 +27,7 @@ Usage::
 
     python workflow/benchmarks/challenge_residuals.py --per-effect 40 --clean 100 --pairs 10 --jobs 2
     python workflow/benchmarks/challenge_residuals.py --per-effect 3 --clean 5 --pairs 1 --sweep-logs 2 --hard 1  # quick
+    python workflow/benchmarks/challenge_residuals.py --scaling   # wall time at 1e4, 1e5, 1e6 samples
 
 Writes ``<out>/challenge_residuals.csv`` (one row per log), ``<out>/challenge_residuals_summary.csv``
 and ``<out>/challenge_residuals.png``; prints the summary table.
@@ -276,6 +277,24 @@ def figure(summary: pd.DataFrame) -> Figure:
     return fig
 
 
+def scaling(sizes=(10_000, 100_000, 1_000_000), seed=7) -> pd.DataFrame:
+    """Wall time of one selection against log length (1 kHz; a clean log and a latency log)."""
+    rows = []
+    for n in sizes:
+        for name in ("clean", "latency"):
+            rng = np.random.default_rng(seed)
+            duration = n / 1000.0
+            motion = random_motion(rng, "multisine", duration, 1.0)
+            eff = {} if name == "clean" else {"latency": {"tau": 0.25e-3}}
+            log = simulate_log(rng, motion, duration=duration, step=STEP, truth_step=TRUTH_STEP, effects=eff)
+            t0 = time.perf_counter()
+            res = select_effects(log["t"], log["truth"], log["measured"], STEP, truth_step=TRUTH_STEP, line_pitch=LINE_PITCH)
+            rows.append({"n_samples": n, "log": name, "wall_s": time.perf_counter() - t0,
+                         "chosen": "+".join(e.name for e in res.effects)})
+            print(rows[-1], flush=True)
+    return pd.DataFrame(rows)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--per-effect", type=int, default=40)
@@ -286,9 +305,13 @@ def main(argv=None):
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--seed", type=int, default=20261128)
     ap.add_argument("--out", default="results/benchmarks")
+    ap.add_argument("--scaling", action="store_true", help="only time one selection at 1e4, 1e5, 1e6 samples")
     args = ap.parse_args(argv)
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    if args.scaling:
+        scaling().to_csv(out / "challenge_residuals_scaling.csv", index=False)
+        return
     ss = np.random.SeedSequence(args.seed)
     seeds = iter(int(s.generate_state(1)[0]) for s in ss.spawn(100000))
     t_start = time.perf_counter()

@@ -74,7 +74,7 @@ _LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
 _Z90 = stats.norm.ppf(0.95)
 _CI_BLOCKS = 40
 _FLOOR_BLOCKS = 20
-_MAX_FIT_SAMPLES = 200_000
+_MAX_FIT_SAMPLES = 50_000
 _LOG_SX_BOUNDS = (-3.0, 1.5)
 
 
@@ -620,9 +620,18 @@ def _make_ctx(t, truth, counts, step, truth_step, aux, grid, line_pitch, fit_idx
     if aux and aux.get("torque") is not None:
         priv["_torque_ref"] = float(np.mean(aux["torque"]))
     if fit_idx is None:
-        every = max(1, math.ceil(t.size / _MAX_FIT_SAMPLES))
-        fit_idx = np.arange(0, t.size, every)
+        fit_idx = np.arange(t.size)
     return _Ctx(t, truth, v, step, truth_step, counts, grid, aux, priv, fit_idx)
+
+
+def _subsample(ctx: _Ctx, every: int) -> _Ctx:
+    """Every ``every``-th sample of a context, with velocity and direction from the full log."""
+    sl = slice(None, None, every)
+    priv = {k: (v[sl] if isinstance(v, np.ndarray) and v.shape == ctx.t.shape else v) for k, v in ctx.priv.items()}
+    aux = {k: v[sl] for k, v in ctx.aux.items()}
+    t = ctx.t[sl]
+    return _Ctx(t, ctx.truth[sl], ctx.velocity[sl], ctx.step, ctx.truth_step, ctx.counts[sl], ctx.grid, aux, priv,
+                np.arange(t.size))
 
 
 def _check_inputs(t, truth, measured, step, truth_step, aux):
@@ -761,14 +770,18 @@ def select_effects(
     if truth_step is None:
         truth_step = estimate_grid_step(truth)
     grid, counts = _grid_and_counts(measured, step)
-    ctx = _make_ctx(t, truth, counts, step, float(truth_step), aux, grid, line_pitch)
+    full = _make_ctx(t, truth, counts, step, float(truth_step), aux, grid, line_pitch)
+    # Long logs are fitted on every k-th sample (at most _MAX_FIT_SAMPLES): the fits, the
+    # criterion and the intervals use the subsample, the before/after statistics the full log.
+    every = max(1, math.ceil(t.size / _MAX_FIT_SAMPLES))
+    ctx = full if every == 1 else _subsample(full, every)
     n_fit = ctx.fit_idx.size
 
     base_model = _Model([])
     x, ll = _fit(base_model, ctx, _base_start(ctx))
     # the offset c is only known modulo whole counts from a poor start: refine from the fit
     cur = _Fitted(base_model, x, ll)
-    before = residual_stats(cur, ctx)
+    before = residual_stats(cur, full)
     chosen = []  # (effect, delta_bic, heldout, p)
     steps = []
     remaining = _candidates(ctx, candidates)
@@ -809,7 +822,7 @@ def select_effects(
         remaining = [c for c in remaining if c is not cand]
         cur = new
 
-    after = residual_stats(cur, ctx)
+    after = residual_stats(cur, full)
     se = _intervals(cur, ctx)
     lows = [b[0] for b in cur.model.bounds(ctx)]
     highs = [b[1] for b in cur.model.bounds(ctx)]
@@ -828,7 +841,7 @@ def select_effects(
     explained = after["std"] <= after["floor_ci"][1]
     message = _message(fitted_effects, explained, before)
     return SelectionResult(fitted_effects, before, after, bool(explained), message, steps,
-                           float(cur.x[0]), float(10.0 ** cur.x[1]), cur, ctx)
+                           float(cur.x[0]), float(10.0 ** cur.x[1]), cur, full)
 
 
 def _fmt(e: FittedEffect) -> str:
