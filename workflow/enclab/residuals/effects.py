@@ -483,8 +483,9 @@ class MissedCounts(Effect):
         """Changepoints of an integer level in ``resid_counts`` (counts) by binary segmentation.
 
         Returns ``(times, jumps)``: at each accepted change the median level on either side
-        differs by a non-zero whole number of counts. The new level starts at the first
-        sample whose rounded residual reaches it.
+        differs by a non-zero whole number of counts, and every segment between changes sits
+        on its level (at least 80 % of its samples within half a count of its median);
+        otherwise no change is returned.
         """
         r = np.asarray(resid_counts, dtype=float)
         segments = [(0, r.size)]
@@ -508,6 +509,14 @@ class MissedCounts(Effect):
             segments.remove((a, b))
             segments += [(a, cp), (cp, b)]
         cps.sort()
+        # a missed count leaves a piecewise-constant integer residual: every segment must sit
+        # on its level (>= 80 % of samples within half a count); a residual that alternates
+        # with the direction of motion (backlash, hysteresis) is no missed count
+        bounds = [0] + [cp for cp, _ in cps] + [r.size]
+        for a, b in zip(bounds[:-1], bounds[1:]):
+            seg = r[a:b]
+            if np.mean(np.abs(seg - np.median(seg)) <= 0.5) < 0.8:
+                return [], []
         times, jumps = [], []
         for cp, jump in cps:
             times.append(float(t[cp]))

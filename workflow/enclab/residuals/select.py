@@ -65,7 +65,6 @@ import numpy as np
 from scipy import optimize, signal, stats
 from scipy.special import log_ndtr, ndtr
 
-from enclab.lrde.fit import _log_interval_prob  # the tail-accurate log(Phi(b) - Phi(a))
 from enclab.residuals import effects as fx
 
 __all__ = ["select_effects", "SelectionResult", "FittedEffect", "residual_stats", "estimate_grid_step"]
@@ -75,7 +74,7 @@ _LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
 _Z90 = stats.norm.ppf(0.95)
 _CI_BLOCKS = 40
 _FLOOR_BLOCKS = 20
-_MAX_FIT_SAMPLES = 200_000
+_MAX_FIT_SAMPLES = 50_000
 _LOG_SX_BOUNDS = (-3.0, 1.5)
 
 
@@ -158,7 +157,8 @@ class _Model:
         priv["_offset"] = x[0]
         aux = {**ctx.aux, **priv}
         theta = ctx.truth
-        var = np.full(ctx.n, priv["_truth_var"] / ctx.step**2 + (10.0 ** x[1]) ** 2)
+        # s is the Gaussian part only; the truth channel's uniform error enters _loglik_terms
+        var = np.full(ctx.n, (10.0 ** x[1]) ** 2)
         for e, sl in zip(self.effects, self.slices):
             p = x[sl]
             if e.kind == "noise":
@@ -189,16 +189,104 @@ class _Model:
         return dict(zip(e.param_names, (float(v) for v in x[sl])))
 
 
+def _log_interval_prob(lower, upper):
+    """``log(Phi(upper) - Phi(lower))`` for ``lower < upper``, accurate in both tails and for
+    narrow intervals far out (no one-bound shortcut: the density of the uniform-plus-Gaussian
+    law needs intervals of width ``2 h / s`` many sigmas out)."""
+    flip = lower > 0
+    lo, up = np.where(flip, -upper, lower), np.where(flip, -lower, upper)
+    log_up = log_ndtr(up)
+    with np.errstate(divide="ignore"):
+        return log_up + np.log1p(-np.exp(np.minimum(log_ndtr(lo) - log_up, 0.0)))
+
+
+def _log_g(u):
+    """log of ``G(u) = u Phi(u) + phi(u)`` (the integral of Phi), accurate for u << 0."""
+    u = np.asarray(u, dtype=float)
+    out = np.empty_like(u)
+    deep = u < -10.0
+    ud = u[deep]
+    inv = 1.0 / (ud * ud)
+    # asymptotic series G(u) = phi(u) / u^2 (1 - 3/u^2 + 15/u^4 - 105/u^6 + 945/u^8), rel. err < 1e-7
+    out[deep] = (-0.5 * ud * ud - _LOG_SQRT_2PI - np.log(ud * ud)
+                 + np.log1p(inv * (-3.0 + inv * (15.0 + inv * (-105.0 + 945.0 * inv)))))
+    us = u[~deep]
+    with np.errstate(divide="ignore"):
+        out[~deep] = np.log(us * ndtr(us) + np.exp(-0.5 * us * us - _LOG_SQRT_2PI))
+    return out
+
+
+def _log_cdf_neg(x, half, sigma):
+    """log P(U + N < x) for ``x <= 0``, U ~ uniform(-half, half), N ~ N(0, sigma^2)."""
+    u1, u2 = (x + half) / sigma, (x - half) / sigma
+    g1, g2 = _log_g(u1), _log_g(u2)
+    with np.errstate(divide="ignore"):
+        return np.log(sigma / (2.0 * half)) + g1 + np.log1p(-np.exp(np.minimum(g2 - g1, 0.0)))
+
+
+def _log_interval_ug(a, b, half, sigma):
+    """log P(a <= U + N < b), ``a < b``, accurate in both tails (symmetry flips a > 0)."""
+    flip = a > 0
+    lo, up = np.where(flip, -b, a), np.where(flip, -a, b)
+    log_lo = _log_cdf_neg(np.minimum(lo, 0.0), half, sigma)
+    up_neg = up <= 0
+    log_up = np.where(up_neg, _log_cdf_neg(np.minimum(up, 0.0), half, sigma), 0.0)
+    # for up > 0: F(up) = 1 - F(-up)
+    pos = ~up_neg
+    if np.any(pos):
+        log_up[pos] = np.log1p(-np.exp(_log_cdf_neg(-up[pos], half, sigma[pos] if np.ndim(sigma) else sigma)))
+    with np.errstate(divide="ignore"):
+        return log_up + np.log1p(-np.exp(np.minimum(log_lo - log_up, 0.0)))
+
+
 def _loglik_terms(ctx, mu, s, idx):
+    """Per-sample log P(count | mu) and its derivatives in ``mu`` and in the jitter ``s``.
+
+    The perturbation of ``mu`` is the truth channel's uniform error (half-width
+    ``truth_step / (2 step)`` counts) plus a Gaussian of std ``s``; with no truth quantization
+    (or one far below ``s``) it is the Gaussian alone with the uniform's variance added.
+    """
     k = ctx.counts[idx].astype(float)
     m, sd = mu[idx], s[idx]
-    a, b = (k - m) / sd, (k + 1.0 - m) / sd
-    ll = _log_interval_prob(a, b)
-    # d ll / d mu and d ll / d s from phi(a), phi(b) over P, in logs for the tails
-    pa = np.exp(-0.5 * a * a - _LOG_SQRT_2PI - ll)
-    pb = np.exp(-0.5 * b * b - _LOG_SQRT_2PI - ll)
-    dmu = (pa - pb) / sd
-    ds = (a * pa - b * pb) / sd
+    a, b = k - m, k + 1.0 - m
+    half = 0.5 * ctx.truth_step / ctx.step
+    if half < 1e-3 * float(np.min(sd)):
+        sg = np.sqrt(sd * sd + half * half / 3.0)
+        az, bz = a / sg, b / sg
+        ll = _log_interval_prob(az, bz)
+        pa = np.exp(np.minimum(-0.5 * az * az - _LOG_SQRT_2PI - ll, 700.0))
+        pb = np.exp(np.minimum(-0.5 * bz * bz - _LOG_SQRT_2PI - ll, 700.0))
+        dmu = (pa - pb) / sg
+        ds = (az * pa - bz * pb) / sg * (sd / sg)
+        return ll, dmu, ds
+    # samples whose count interval holds mu with > 10 sigma to spare on both sides have
+    # P = 1 - O(Phi(-10)) = 1 - 8e-24: log P and its derivatives are 0 to double precision
+    reach = half + 10.0 * sd
+    active = (a > -reach) | (b < reach)
+    ll, dmu, ds = np.zeros(a.size), np.zeros(a.size), np.zeros(a.size)
+    if np.any(active):
+        ll[active], dmu[active], ds[active] = _ug_terms(a[active], b[active], half, sd[active])
+    return ll, dmu, ds
+
+
+def _ug_terms(a, b, half, sd):
+    """log P(a <= U + N < b) and its derivatives in mu (= -d/da - d/db) and in sd."""
+    ll = _log_interval_ug(a, b, half, sd)
+    log2h = math.log(2.0 * half)
+
+    def dens(x):  # log f(x), f the density of U + N
+        return _log_interval_prob((x - half) / sd, (x + half) / sd) - log2h
+
+    def ratio(logv):
+        return np.exp(np.minimum(logv - ll, 700.0))
+
+    dmu = ratio(dens(a)) - ratio(dens(b))
+
+    def dphi(x):  # (phi((x + h)/s) - phi((x - h)/s)) / (2h) / P
+        u1, u2 = (x + half) / sd, (x - half) / sd
+        return ratio(-0.5 * u1 * u1 - _LOG_SQRT_2PI - log2h) - ratio(-0.5 * u2 * u2 - _LOG_SQRT_2PI - log2h)
+
+    ds = dphi(b) - dphi(a)
     return ll, dmu, ds
 
 
@@ -486,16 +574,34 @@ def estimate_grid_step(x, rtol: float = 1e-6) -> float:
 
 
 def _smoothed_velocity(t, truth, truth_step):
+    """Velocity of the truth (Savitzky-Golay, 21 samples, quadratic) and a dead zone below it.
+
+    The dead zone ``v_eps`` is where the direction is kept from the last motion (the memory of
+    hysteresis and backlash). A truth that moves without flicker (a clean quantized or smooth
+    channel) gets no dead zone: a centred filter of a monotone run never changes sign, and any
+    dead zone would delay the direction at each reversal and bias a hysteresis width. A truth
+    that flickers (more than 5 % of its moves reverse the previous one) gets a dead zone above
+    both a one-count flicker (``0.075 truth_step / dt``, the largest filter output of one
+    count) and three standard deviations of the filtered white noise (from the MAD of the
+    sample-to-sample differences).
+    """
     dt = float(np.median(np.diff(t)))
     n = truth.size
     win = min(21, n - (1 - n % 2)) if n >= 5 else 0
     if win >= 5:
         v = signal.savgol_filter(truth, win, 2, deriv=1, delta=dt)
-        # the derivative noise of a quantized truth: below it the direction is kept (memory)
-        v_eps = truth_step / (win * dt) if truth_step else 0.0
+        half = win // 2
+        sum_i2 = half * (half + 1) * (2 * half + 1) / 3.0
     else:
         v = np.gradient(truth, t)
-        v_eps = 0.0
+        sum_i2 = 0.5
+    d = np.diff(truth)
+    moves = np.sign(d[d != 0])
+    flicker = float(np.mean(moves[1:] != moves[:-1])) if moves.size > 1 else 0.0
+    if flicker <= 0.05:
+        return v, 0.0
+    sigma_n = float(np.median(np.abs(d - np.median(d)))) / 0.6745 / math.sqrt(2.0)
+    v_eps = max(0.075 * truth_step / dt, 3.0 * sigma_n / (math.sqrt(sum_i2) * dt))
     return v, v_eps
 
 
@@ -514,9 +620,18 @@ def _make_ctx(t, truth, counts, step, truth_step, aux, grid, line_pitch, fit_idx
     if aux and aux.get("torque") is not None:
         priv["_torque_ref"] = float(np.mean(aux["torque"]))
     if fit_idx is None:
-        every = max(1, math.ceil(t.size / _MAX_FIT_SAMPLES))
-        fit_idx = np.arange(0, t.size, every)
+        fit_idx = np.arange(t.size)
     return _Ctx(t, truth, v, step, truth_step, counts, grid, aux, priv, fit_idx)
+
+
+def _subsample(ctx: _Ctx, every: int) -> _Ctx:
+    """Every ``every``-th sample of a context, with velocity and direction from the full log."""
+    sl = slice(None, None, every)
+    priv = {k: (v[sl] if isinstance(v, np.ndarray) and v.shape == ctx.t.shape else v) for k, v in ctx.priv.items()}
+    aux = {k: v[sl] for k, v in ctx.aux.items()}
+    t = ctx.t[sl]
+    return _Ctx(t, ctx.truth[sl], ctx.velocity[sl], ctx.step, ctx.truth_step, ctx.counts[sl], ctx.grid, aux, priv,
+                np.arange(t.size))
 
 
 def _check_inputs(t, truth, measured, step, truth_step, aux):
@@ -598,6 +713,7 @@ def select_effects(
     max_effects: int = 4,
     max_tries: int = 3,
     line_pitch: float | None = None,
+    stop_at_floor: bool = True,
 ) -> SelectionResult:
     """Find, fit and report the effects that explain ``measured`` against ``truth``.
 
@@ -628,6 +744,11 @@ def select_effects(
         At most this many effects; at most this many candidates confirmed per step.
     line_pitch : float, optional
         Line pitch (rad) of the line-pitch harmonics; default four measured steps.
+    stop_at_floor : bool
+        Stop as soon as the residual std is within the floor's interval (the stop rule of
+        DESIGN 2.3). The likelihood can still see an effect whose std change is inside that
+        interval; False tries the candidates anyway (the selection then ends only when none
+        passes).
 
     Returns
     -------
@@ -649,20 +770,24 @@ def select_effects(
     if truth_step is None:
         truth_step = estimate_grid_step(truth)
     grid, counts = _grid_and_counts(measured, step)
-    ctx = _make_ctx(t, truth, counts, step, float(truth_step), aux, grid, line_pitch)
+    full = _make_ctx(t, truth, counts, step, float(truth_step), aux, grid, line_pitch)
+    # Long logs are fitted on every k-th sample (at most _MAX_FIT_SAMPLES): the fits, the
+    # criterion and the intervals use the subsample, the before/after statistics the full log.
+    every = max(1, math.ceil(t.size / _MAX_FIT_SAMPLES))
+    ctx = full if every == 1 else _subsample(full, every)
     n_fit = ctx.fit_idx.size
 
     base_model = _Model([])
     x, ll = _fit(base_model, ctx, _base_start(ctx))
     # the offset c is only known modulo whole counts from a poor start: refine from the fit
     cur = _Fitted(base_model, x, ll)
-    before = residual_stats(cur, ctx)
+    before = residual_stats(cur, full)
     chosen = []  # (effect, delta_bic, heldout, p)
     steps = []
     remaining = _candidates(ctx, candidates)
     for _ in range(max_effects):
         st = residual_stats(cur, ctx)
-        if st["std"] <= st["floor_ci"][1]:
+        if stop_at_floor and st["std"] <= st["floor_ci"][1]:
             break
         trials = []
         for cand in remaining:
@@ -697,7 +822,7 @@ def select_effects(
         remaining = [c for c in remaining if c is not cand]
         cur = new
 
-    after = residual_stats(cur, ctx)
+    after = residual_stats(cur, full)
     se = _intervals(cur, ctx)
     lows = [b[0] for b in cur.model.bounds(ctx)]
     highs = [b[1] for b in cur.model.bounds(ctx)]
@@ -716,7 +841,7 @@ def select_effects(
     explained = after["std"] <= after["floor_ci"][1]
     message = _message(fitted_effects, explained, before)
     return SelectionResult(fitted_effects, before, after, bool(explained), message, steps,
-                           float(cur.x[0]), float(10.0 ** cur.x[1]), cur, ctx)
+                           float(cur.x[0]), float(10.0 ** cur.x[1]), cur, full)
 
 
 def _fmt(e: FittedEffect) -> str:
