@@ -1,5 +1,6 @@
 """Rule summary: results/<log_id>/summary.json from the blocks of the stages the log ran."""
 from enclab import analysis, io
+from enclab.residuals.pipeline import summary_block
 from enclab.runner import run
 
 
@@ -15,6 +16,10 @@ def main(smk):
         summary = analysis.log_header(meta)
     if "lrde" in inputs:
         summary["lrde"] = io.read_json(inputs["lrde"])
+    if "residuals" in inputs:
+        paths = smk.input.residuals
+        paths = [paths] if isinstance(paths, str) else list(paths)
+        summary["residuals"] = summary_block([io.read_json(p) for p in paths])
     io.write_json(summary, smk.output.summary)
 
 

@@ -4,7 +4,9 @@ Simulated Phantom Premium 1.5 runs of paper 000's Section IV protocol (1 kHz, 15
 sinusoids at distinct frequencies within 0.1 Hz of 5 Hz, truth at the robot's 0.125 mrad
 resolution), written as ordinary logs: a Parquet table with a time column in seconds and one
 int64 counts column per joint. Every run of one centre configuration shares a repeat group, so
-the batch stage pools them as a lab pools repeated runs.
+the batch stage pools them as a lab pools repeated runs. Two paper-002 logs of an extreme
+low-resolution encoder, and two two-channel logs for the residual stage (a motor encoder through
+a gearbox against an output encoder: one with backlash, one clean).
 
 Deterministic: the same seed gives byte-identical logs. Usage (from the repository root)::
 
@@ -17,9 +19,11 @@ import argparse
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import yaml
 
 from enclab import io
+from enclab.quantize import quantize
 from enclab.lrde import simulate as lrde_sim
 from enclab.simulate import fig6_configurations_deg, phantom_protocol_run
 
@@ -119,6 +123,59 @@ def lrde_entries(out_dir: Path, seed: int) -> list[dict]:
     return entries
 
 
+def play(x: np.ndarray, width: float) -> np.ndarray:
+    """Play (backlash) operator: the output stays put until the input has crossed the play."""
+    y = np.empty_like(x)
+    y[0] = x[0]
+    half = width / 2
+    for k in range(1, x.size):
+        y[k] = min(max(y[k - 1], x[k] - half), x[k] + half)
+    return y
+
+
+def residual_entries(out_dir: Path, seed: int) -> list[dict]:
+    """Two-channel logs for the residual stage: a motor encoder through a gearbox (the fine
+    truth) and an 8192-cpr output encoder (the measured channel, its counter zero arbitrary),
+    1 Hz, 20 deg sine for 6 s at 1 kHz. One with gear backlash (0.012 rad of play between motor
+    and output), one clean control. Nothing about the effect is declared in the manifest.
+    """
+    cpr_motor, gear, cpr_out = 4000, 23, 8192
+    motor_step = 2 * np.pi / (cpr_motor * gear)
+    out_step = 2 * np.pi / cpr_out
+    t = np.arange(6000) / 1000.0
+    entries = []
+    runs = [("res_backlash_r01", 0.012, "gear backlash: 0.012 rad of play between motor and output"),
+            ("res_clean_r01", 0.0, "clean control: the output encoder reads the motor angle exactly")]
+    for (name, width, description), ss in zip(runs, np.random.SeedSequence(seed).spawn(len(runs))):
+        rng = np.random.default_rng(ss)
+        theta = np.deg2rad(20.0) * np.sin(2 * np.pi * 1.0 * t + rng.uniform(0, 2 * np.pi)) \
+            + rng.uniform(0, out_step) + rng.normal(0, 1e-6, t.size)
+        load = play(theta, width) if width else theta
+        zero = int(rng.integers(-5000, 5000))
+        log = pd.DataFrame({"t": t,
+                            "motor_counts": quantize(theta, motor_step),
+                            "output_counts": quantize(load, out_step, 0.0) + zero})
+        io.write_table(log, out_dir / f"{name}.parquet")
+        entries.append({
+            "id": name,
+            "file": f"sim/{name}.parquet",
+            "format": "parquet",
+            "description": f"Simulated motor and output encoders on one geared axis; {description}",
+            "group": None,
+            "tags": ["simulated", "residuals"],
+            "provenance": "enclab data/tools/make_embedded_data.py (seed %d)" % seed,
+            "device": {"kind": "single_joint"},
+            "time": {"column": "t", "unit": "s", "nominal_rate_hz": 1000.0},
+            "channels": [
+                {"name": "motor", "column": "motor_counts", "role": "truth", "joint": 1,
+                 "unit": "counts", "counts_per_rev": cpr_motor, "gear_ratio": gear},
+                {"name": "output", "column": "output_counts", "role": "measured", "joint": 1,
+                 "unit": "counts", "counts_per_rev": cpr_out},
+            ],
+        })
+    return entries
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seed", type=int, default=20261122)
@@ -131,10 +188,12 @@ def main(argv=None) -> None:
     args = parser.parse_args(argv)
     sim_dir = ROOT / "data" / "sim"
     sim_dir.mkdir(parents=True, exist_ok=True)
-    for old in [*sim_dir.glob("phantom_*.parquet"), *sim_dir.glob("lrde_*.parquet")]:
+    for old in [*sim_dir.glob("phantom_*.parquet"), *sim_dir.glob("lrde_*.parquet"),
+                *sim_dir.glob("res_*.parquet")]:
         old.unlink()
     entries = phantom_entries(sim_dir, args.seed, args.fig6_repeats, args.fig7_repeats, args.steps)
     entries += lrde_entries(sim_dir, args.seed + 1)
+    entries += residual_entries(sim_dir, args.seed + 2)
     static = ROOT / "data" / "tools" / "manifest_static.yaml"
     if static.exists():
         entries += yaml.safe_load(static.read_text())["logs"]

@@ -12,6 +12,7 @@ import enclab
 from enclab import io as enclab_io
 from enclab import manifest as enclab_manifest
 from enclab.errors import EnclabInputError
+from enclab.residuals.pipeline import residual_pairs as enclab_residual_pairs
 
 
 with open(os.path.join(workflow.basedir, "workflow/schemas/config.schema.yaml")) as handle:
@@ -38,7 +39,13 @@ if config.get("only_logs"):
 
 
 def _stages(entry):
-    return (entry.get("analysis") or {}).get("stages", ["quantization"])
+    stages = (entry.get("analysis") or {}).get("stages")
+    if stages is None:
+        # A truth/measured pair and nothing else declared (a plain CSV) runs the residual stage
+        # alone: re-quantizing needs the truth's grid or explicit steps, so quantization is
+        # asked for by name on such a log. Without a pair the default stays quantization.
+        stages = ["residuals"] if enclab_residual_pairs(entry) else ["quantization"]
+    return stages
 
 
 LOG_IDS = sorted(ENTRIES)
@@ -51,6 +58,11 @@ if config.get("batch_scope", "all") == "completed":
     LOG_IDS = [i for i in LOG_IDS if i not in _failed]
 QUANT_IDS = [i for i in LOG_IDS if "quantization" in _stages(ENTRIES[i])]
 LRDE_IDS = [i for i in LOG_IDS if "lrde" in _stages(ENTRIES[i])]
+# Residual stage: every measured channel with a truth channel on the same joint (nothing to
+# declare; analysis.residuals: false opts a log out).
+RESIDUAL_PAIRS = {i: enclab_residual_pairs(ENTRIES[i]) for i in LOG_IDS}
+RESIDUAL_PAIRS = {i: p for i, p in RESIDUAL_PAIRS.items() if p}
+RESIDUAL_IDS = sorted(RESIDUAL_PAIRS)
 
 
 def _first_of_groups(ids):
@@ -71,6 +83,7 @@ CODE_DIGEST = enclab.code_digest()
 
 wildcard_constraints:
     log_id="|".join(re.escape(i) for i in LOG_IDS) or "NO_LOGS",
+    channel="[A-Za-z_][A-Za-z0-9_]*",
 
 
 def raw_inputs(wildcards):
@@ -90,7 +103,7 @@ def device_of(wildcards):
 
 
 def summary_inputs(wildcards):
-    """summary.json merges the blocks of the stages a log runs (quantization and/or lrde)."""
+    """summary.json merges the blocks of the stages a log runs (quantization, lrde, residuals)."""
     log_id = wildcards.log_id
     inputs = {"canonical": f"results/{log_id}/canonical.parquet"}
     if log_id in QUANT_IDS:
@@ -99,7 +112,25 @@ def summary_inputs(wildcards):
                       theory=f"results/{log_id}/theory.json")
     if log_id in LRDE_IDS:
         inputs["lrde"] = f"results/{log_id}/lrde/lrde.json"
+    if log_id in RESIDUAL_PAIRS:
+        inputs["residuals"] = [f"results/{log_id}/residuals/{p['measured']}/residuals.json"
+                               for p in RESIDUAL_PAIRS[log_id]]
     return inputs
+
+
+def residual_settings(wildcards):
+    """config["residuals"] updated with the log's own analysis.residuals block."""
+    settings = dict(config.get("residuals") or {})
+    settings.update((ENTRIES[wildcards.log_id].get("analysis") or {}).get("residuals") or {})
+    return settings
+
+
+def residual_pair(wildcards):
+    for pair in RESIDUAL_PAIRS.get(wildcards.log_id, []):
+        if pair["measured"] == wildcards.channel:
+            return pair
+    raise WorkflowError(f"log {wildcards.log_id!r} has no measured channel {wildcards.channel!r} "
+                        "with a truth channel on the same joint")
 
 
 def lrde_settings(wildcards):
@@ -126,4 +157,9 @@ def all_targets():
         targets += ["results/figures/fig6_position.png", "results/figures/fig7_derivatives.png"]
     if LRDE_IDS:
         targets += ["results/batch/lrde.csv"]
+    for log_id, pairs in RESIDUAL_PAIRS.items():
+        targets += [f"results/{log_id}/residuals/{p['measured']}/{name}"
+                    for p in pairs for name in ("diagnostics.png", "before_after.png")]
+    if RESIDUAL_IDS:
+        targets += ["results/batch/residuals.csv"]
     return targets

@@ -1,0 +1,228 @@
+"""Tests for enclab.residuals.effects: each effect's signature against its analytic form."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from enclab.residuals import effects as fx
+from enclab.residuals.simulate import simulate_log
+
+STEP = 2 * np.pi / 4096
+
+
+def _aux(**kw):
+    base = {"_step": STEP, "_offset": 0.5, "_theta_ref": 0.0, "_line_pitch": 16 * STEP}
+    base.update(kw)
+    return base
+
+
+def _play_reference(x, w):
+    """Slow per-sample play operator (the textbook recursion) as an independent check."""
+    y = np.empty_like(x)
+    y[0] = x[0]
+    for i in range(1, x.size):
+        y[i] = min(max(y[i - 1], x[i] - w / 2), x[i] + w / 2)
+    return y
+
+
+# ------------------------------------------------------------------------ memory and play
+def test_motion_sign_keeps_direction_through_dwells():
+    v = np.array([0.0, 0.0, 1.0, 0.0, 0.0, -2.0, 0.0, 3.0])
+    np.testing.assert_array_equal(fx.motion_sign(v), [0, 0, 1, 1, 1, -1, -1, 1])
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    steps=st.lists(st.floats(-1.0, 1.0, allow_nan=False), min_size=2, max_size=200),
+    w=st.floats(0.0, 1.5),
+)
+def test_play_operator_matches_per_sample_recursion(steps, w):
+    x = np.cumsum(np.round(np.asarray(steps), 3))  # repeated values (dwells) included
+    np.testing.assert_allclose(fx.play_operator(x, w), _play_reference(x, w), rtol=0, atol=1e-12)
+
+
+def test_backlash_signature_is_half_width_by_direction_after_reversal():
+    t = np.linspace(0, 4, 4001)
+    theta = 0.3 * np.sin(2 * np.pi * 0.5 * t)
+    w = 0.02
+    r = fx.Backlash().apply(theta, t, None, {}, [w]) - theta
+    v = np.gradient(theta, t)
+    # once the input has travelled w since its last reversal the play is taken up
+    p = fx.play_operator(theta, w)
+    engaged = np.abs(theta - p) >= w / 2 - 1e-12
+    rising, falling = engaged & (v > 0), engaged & (v < 0)
+    assert rising.sum() > 1000 and falling.sum() > 1000
+    np.testing.assert_allclose(r[rising], -w / 2, atol=1e-12)
+    np.testing.assert_allclose(r[falling], w / 2, atol=1e-12)
+    # negative width: the measured side leads by the same amount
+    r_neg = fx.Backlash().apply(theta, t, None, {}, [-w]) - theta
+    np.testing.assert_allclose(r_neg[rising], w / 2, atol=1e-12)
+    np.testing.assert_allclose(r_neg[falling], -w / 2, atol=1e-12)
+
+
+def test_backlash_and_hysteresis_share_the_first_order_term_at_zero():
+    # both branches of the signed play join at w = 0 with slope -sign/2 (interior null)
+    t = np.linspace(0, 2, 2001)
+    theta = 0.2 * np.sin(2 * np.pi * t)
+    v = np.gradient(theta, t)
+    ctx = type("C", (), {"step": STEP})()
+    J = fx.Backlash().signature(theta, t, v, {}, ctx)[:, 0]
+    sign = fx.motion_sign(np.r_[0.0, np.diff(theta)])  # direction of the last sample-to-sample move
+    # away from the reversals (input travel > fd step) the slope is exactly -sign/2
+    far = np.abs(theta - fx.play_operator(theta, 1e-3)) >= 0.5e-3 - 1e-12
+    np.testing.assert_allclose(J[far], -0.5 * sign[far], atol=1e-9)
+    Jh = fx.Hysteresis().signature(theta, t, v, {"_motion_sign": sign}, ctx)[:, 0]
+    np.testing.assert_allclose(Jh, -0.5 * sign, atol=1e-12)
+
+
+def test_play_operator_rejects_negative_width():
+    with pytest.raises(ValueError, match="play width"):
+        fx.play_operator([0.0, 1.0], -0.1)
+
+
+# ------------------------------------------------------------------------ shift signatures
+def test_hysteresis_signature_is_half_width_against_motion():
+    t = np.linspace(0, 1, 1001)
+    v = np.cos(2 * np.pi * t)
+    theta = np.sin(2 * np.pi * t) / (2 * np.pi)
+    sign = fx.motion_sign(v)
+    r = fx.Hysteresis().apply(theta, t, v, {"_motion_sign": sign}, [0.004]) - theta
+    np.testing.assert_allclose(r, -0.002 * sign)
+
+
+def test_latency_signature_is_tau_times_velocity():
+    t = np.linspace(0, 1, 101)
+    v = np.linspace(-3, 3, 101)
+    r = fx.Latency().apply(np.zeros(101), t, v, {}, [2e-3]) - 0.0
+    np.testing.assert_allclose(r, -2e-3 * v)
+
+
+def test_scale_mismatch_signature_ramps_with_angle():
+    theta = np.linspace(-2, 2, 41)
+    r = fx.ScaleMismatch().apply(theta, None, None, {"_theta_ref": 0.5}, [1e-3]) - theta
+    np.testing.assert_allclose(r, 1e-3 * (theta - 0.5))
+
+
+def test_angle_harmonics_periodic_and_derived_amplitude_phase():
+    e = fx.AngleHarmonics()
+    theta = np.linspace(0, 2 * np.pi, 50, endpoint=False)
+    p = [3e-4, -4e-4, 1e-4, 0.0]
+    r1 = e.apply(theta, None, None, {}, p) - theta
+    r2 = e.apply(theta + 2 * np.pi, None, None, {}, p) - (theta + 2 * np.pi)
+    np.testing.assert_allclose(r1, r2, atol=1e-15)
+    d = e.derived(dict(zip(e.param_names, p)))
+    # a cos + b sin = amp sin(theta + phase)
+    np.testing.assert_allclose(d["amp1"] * np.sin(theta + d["phase1"]), 3e-4 * np.cos(theta) - 4e-4 * np.sin(theta), atol=1e-15)
+    assert d["amp1"] == pytest.approx(5e-4)
+
+
+def test_line_pitch_harmonics_periodic_in_line_pitch():
+    e = fx.LinePitchHarmonics()
+    aux = _aux()
+    theta = np.linspace(0, 1, 200)
+    r1 = e.apply(theta, None, None, aux, [1e-4, 2e-4]) - theta
+    r2 = e.apply(theta + aux["_line_pitch"], None, None, aux, [1e-4, 2e-4]) - (theta + aux["_line_pitch"])
+    np.testing.assert_allclose(r1, r2, atol=1e-12)
+
+
+def test_line_pitch_at_four_counts_is_not_a_separate_candidate():
+    ctx = type("C", (), {"step": STEP, "priv": {"_line_pitch": 4 * STEP}})()
+    assert not fx.LinePitchHarmonics().applicable(ctx)
+    ctx.priv["_line_pitch"] = 16 * STEP
+    assert fx.LinePitchHarmonics().applicable(ctx)
+
+
+def test_quadrature_edges_model_matches_exact_edge_displacement():
+    # the model's nearest-threshold shift must give the same counts as displacing each edge
+    # (the independent construction of the simulator) for |e| < step / 2
+    rng = np.random.default_rng(3)
+    p = {"e0": 0.2 * STEP, "e1": -0.3 * STEP, "e2": 0.05 * STEP}
+    c = 0.37
+    log = simulate_log(rng, lambda t: 0.05 * np.sin(2 * np.pi * t), duration=2.0, step=STEP, truth_step=STEP / 64,
+                       effects={"quadrature_edges": p}, offset_frac=c)
+    aux = _aux(_offset=c)
+    theta_eff = fx.QuadratureEdges().apply(log["theta"], log["t"], None, aux, list(p.values()))
+    counts = np.floor(theta_eff / STEP + c).astype(np.int64)
+    np.testing.assert_array_equal(counts, log["counts"])
+    assert np.any(counts != np.floor(log["theta"] / STEP + c))
+
+
+def test_quadrature_pattern_repeats_every_four_counts_and_sums_to_zero():
+    e = fx.QuadratureEdges()
+    aux = _aux(_offset=0.0)
+    m = np.arange(12)
+    theta = (m + 1e-3) * STEP  # at the threshold into count m (with c = 0 the count is floor(theta / step))
+    shift = e.apply(theta, None, None, aux, [1e-4, 2e-4, -5e-5]) - theta
+    pattern = -np.array([1e-4, 2e-4, -5e-5, -(1e-4 + 2e-4 - 5e-5)])
+    np.testing.assert_allclose(shift, np.tile(pattern, 3))
+    assert shift[:4].sum() == pytest.approx(0.0, abs=1e-18)
+
+
+# ------------------------------------------------------------------------ noise effects
+def test_timestamp_jitter_std_is_sigma_times_speed():
+    v = np.array([-2.0, 0.0, 0.5])
+    np.testing.assert_allclose(fx.TimestampJitter().noise_std(None, None, v, {}, [1e-3]), [2e-3, 0.0, 5e-4])
+    assert fx.TimestampJitter.boundary == ("sigma_t",)
+
+
+def test_truth_quantization_std_is_uniform_std():
+    sd = fx.TruthQuantization().noise_std(np.zeros(3), None, None, {"_truth_step": 1e-3}, [])
+    np.testing.assert_allclose(sd, 1e-3 / math.sqrt(12))
+
+
+# ------------------------------------------------------------------------ counter effects
+def test_missed_counts_detect_finds_time_and_integer_jump():
+    rng = np.random.default_rng(0)
+    t = np.arange(5000) / 1000
+    r = rng.integers(0, 2, t.size) * 0.0 + (rng.random(t.size) < 0.03)  # sporadic 0/1 flips
+    r = r - 2.0 * (t >= 3.1)  # measured lower by 2 after 3.1 s
+    times, jumps = fx.MissedCounts.detect(t, r)
+    assert len(times) == 1 and jumps == [2]
+    assert times[0] == pytest.approx(3.1, abs=0.02)
+    shift = fx.MissedCounts(times, jumps).apply(np.zeros(t.size), t, None, _aux(), None)
+    np.testing.assert_allclose(shift, -2 * STEP * (t >= times[0]))
+
+
+def test_wrap_detect_snaps_to_two_pi():
+    truth = np.linspace(2.0, 4.5, 1000)
+    measured = np.mod(truth + np.pi, 2 * np.pi) - np.pi
+    assert fx.WrapAround.detect(truth, measured, STEP) == 2 * np.pi
+    assert fx.WrapAround.detect(truth, truth, STEP) is None
+
+
+def test_wrap_apply_brings_model_onto_wrapped_counts():
+    truth = np.linspace(2.0, 4.5, 1000)
+    measured = np.mod(truth + np.pi, 2 * np.pi) - np.pi
+    counts = np.floor(measured / STEP + 0.5)
+    aux = _aux(_offset=0.5, _counts=counts)
+    theta = fx.WrapAround(2 * np.pi).apply(truth, None, None, aux, None)
+    np.testing.assert_array_equal(np.floor(theta / STEP + 0.5), counts)
+
+
+# ------------------------------------------------------------------------ motion terms
+def test_drift_phase_instantaneous_frequency():
+    t = np.linspace(0, 5, 50001)
+    phi = fx.drift_phase(t, 2.0, 0.3, drift_hz_per_s=0.1, t_ref=1.0)
+    f_inst = np.gradient(phi, t) / (2 * np.pi)
+    np.testing.assert_allclose(f_inst[1:-1], 2.0 + 0.1 * (t[1:-1] - 1.0), atol=1e-9)
+    assert phi[np.searchsorted(t, 1.0)] == pytest.approx(0.3)
+
+
+def test_distorted_sinusoid_terms_recovered_exactly_by_least_squares():
+    t = np.linspace(0, 3, 3000)
+    truth = dict(bias=0.01, amplitude=0.2, f0_hz=1.3, phase=0.4, drift_hz_per_s=0.02, a3=0.004, psi3=1.1, a2=0.002, psi2=-0.5)
+    y = fx.distorted_sinusoid(t, **truth)
+    phi = fx.drift_phase(t, 1.3, 0.4, 0.02)
+    X = np.column_stack([np.ones_like(t), np.sin(phi), np.sin(2 * phi), np.cos(2 * phi), np.sin(3 * phi), np.cos(3 * phi)])
+    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    assert coef[0] == pytest.approx(0.01, abs=1e-12)
+    assert coef[1] == pytest.approx(0.2, abs=1e-12)
+    assert math.hypot(coef[2], coef[3]) == pytest.approx(0.002, abs=1e-12)
+    assert math.hypot(coef[4], coef[5]) == pytest.approx(0.004, abs=1e-12)
+    assert math.atan2(coef[5], coef[4]) == pytest.approx(1.1, abs=1e-9)
+    # with no distortion and no drift it is the plain sinusoid
+    np.testing.assert_allclose(fx.distorted_sinusoid(t, 0.0, 1.0, 1.3, 0.4), np.sin(2 * np.pi * 1.3 * t + 0.4), atol=1e-12)

@@ -1,0 +1,219 @@
+"""Tests for enclab.residuals.select: likelihood, boundary nulls, recovery, clean logs."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from scipy import integrate, stats
+from scipy.special import log_ndtr
+
+from enclab.residuals import select as sel
+from enclab.residuals.select import select_effects
+from enclab.residuals.simulate import random_motion, simulate_log
+
+STEP = 2 * np.pi / 4096
+TRUTH_STEP = STEP / 8
+Z90 = stats.norm.ppf(0.95)
+
+
+def _log(seed, effects=None, duration=6.0, amplitude=0.5, kind="sine"):
+    rng = np.random.default_rng(seed)
+    motion = random_motion(rng, kind, duration, amplitude)
+    return simulate_log(rng, motion, duration=duration, step=STEP, truth_step=TRUTH_STEP, effects=effects or {})
+
+
+# ------------------------------------------------------------------------ likelihood pieces
+def _ug_density_neg(x, half, sig):
+    """Density of U(-half, half) + N(0, sig^2) at x <= 0 from log-CDFs (no 1 - 1 cancellation)."""
+    lo, up = log_ndtr((x - half) / sig), log_ndtr((x + half) / sig)
+    return np.exp(up) * -np.expm1(lo - up) / (2 * half)
+
+
+@pytest.mark.parametrize("sig", [1e-3, 0.02, 0.3])
+@pytest.mark.parametrize("a", [-4.0, -1.0, -0.2, -0.03, 0.0, 0.4, 2.5])
+def test_uniform_gaussian_interval_probability_matches_quadrature(a, sig):
+    half = 1 / 16
+    b = a + 1.0
+    # integrate the density over the mirror interval (the law is symmetric), away from 1 - 1
+    ref = integrate.quad(_ug_density_neg, -b, -a, args=(half, sig), points=[-half] if -b < -half < -a else None,
+                         epsabs=0, epsrel=1e-12, limit=200)[0] if -a <= 0 else None
+    got = sel._log_interval_ug(np.array([a]), np.array([b]), half, np.array([sig]))[0]
+    if ref is None:  # a < 0 < b: compare the probability itself
+        ref = integrate.quad(lambda x: _ug_density_neg(-abs(x), half, sig), a, b, points=[-half, 0.0, half],
+                             epsabs=0, epsrel=1e-12, limit=200)[0]
+    if ref > 1e-300:
+        assert got == pytest.approx(math.log(ref), rel=1e-8, abs=1e-10)
+    else:  # beyond double precision: the log must still be finite and very negative
+        assert np.isfinite(got) and got < -700
+
+
+def test_loglik_derivatives_match_finite_differences():
+    rng = np.random.default_rng(0)
+    n = 300
+    ctx = type("C", (), {"truth_step": 1 / 8, "step": 1.0})()
+    ctx.counts = rng.integers(-1, 3, n)
+    mu, s = rng.uniform(-2, 3, n), rng.uniform(0.01, 0.5, n)
+    idx = np.arange(n)
+    ll, dmu, ds = sel._loglik_terms(ctx, mu, s, idx)
+    h = 1e-6
+    fd_mu = (sel._loglik_terms(ctx, mu + h, s, idx)[0] - sel._loglik_terms(ctx, mu - h, s, idx)[0]) / (2 * h)
+    fd_s = (sel._loglik_terms(ctx, mu, s + h, idx)[0] - sel._loglik_terms(ctx, mu, s - h, idx)[0]) / (2 * h)
+    ok = ll > -200  # where the finite difference itself is well conditioned
+    np.testing.assert_allclose(dmu[ok], fd_mu[ok], rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(ds[ok], fd_s[ok], rtol=1e-5, atol=1e-5)
+
+
+def test_floor_probabilities_uniform_limit():
+    # sigma -> 0: P(count = floor(mu) + 1) is the part of [mu - h, mu + h) above the next threshold
+    mu = np.array([0.98, 0.5, 0.02])
+    P = sel._floor_probs(mu, 0.05, 1e-9, np.array([-1, 0, 1]))
+    np.testing.assert_allclose(P[2], [0.3, 0.0, 0.0], atol=1e-9)
+    np.testing.assert_allclose(P[0], [0.0, 0.0, 0.3], atol=1e-9)
+    np.testing.assert_allclose(P.sum(axis=0), 1.0, atol=1e-12)
+
+
+# ------------------------------------------------------------------------ boundary nulls
+def test_boundary_pvalue_is_half_chi2_mixture():
+    # chi2_1 critical value at 10 % gives p = 5 % under the 50:50 mixture with chi2_0
+    crit = stats.chi2.ppf(0.90, 1)
+    assert sel._lr_pvalue(crit, 1, 1) == pytest.approx(0.05)
+    assert sel._lr_pvalue(crit, 1, 0) == pytest.approx(0.10)
+    assert sel._lr_pvalue(0.0, 1, 1) == pytest.approx(1.0)
+    # k = 2 with one boundary parameter: 0.5 chi2_1 + 0.5 chi2_2
+    assert sel._lr_pvalue(4.0, 2, 1) == pytest.approx(0.5 * stats.chi2.sf(4, 1) + 0.5 * stats.chi2.sf(4, 2))
+
+
+def test_jitter_on_clean_log_sits_at_its_boundary_and_is_not_selected():
+    log = _log(11)
+    res = select_effects(log["t"], log["truth"], log["measured"], STEP, truth_step=TRUTH_STEP,
+                         candidates=["timestamp_jitter"])
+    assert res.effects == []
+    ctx = res._ctx
+    base = res._fitted
+    new = sel._extend(base, sel.fx.TimestampJitter(), ctx)
+    sig = new.x[-1]
+    lr = 2 * (new.ll - base.ll)
+    assert lr >= -1e-6
+    assert sel._lr_pvalue(lr, 1, 1) > 0.01
+
+
+# ------------------------------------------------------------------------ end to end
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_clean_log_gets_no_effect(seed):
+    log = _log(seed, kind=["sine", "multisine", "smooth"][seed % 3])
+    res = select_effects(log["t"], log["truth"], log["measured"], STEP, truth_step=TRUTH_STEP)
+    assert res.effects == []
+    assert res.explained
+    assert "no effect" in res.message
+    lo, hi = res.after["floor_ci"]
+    assert lo <= res.after["std"] <= hi
+
+
+@pytest.mark.parametrize(
+    "name, params",
+    [
+        ("latency", {"tau": 1e-3}),
+        ("backlash", {"w": -2 * STEP}),
+        ("scale_mismatch", {"g": 2e-3}),
+        ("hysteresis", {"h": 0.6 * STEP}),
+    ],
+)
+def test_round_trip_recovers_parameters_within_their_standard_error(name, params):
+    log = _log(21, {name: params}, duration=8.0)
+    res = select_effects(log["t"], log["truth"], log["measured"], STEP, truth_step=TRUTH_STEP)
+    names = [e.name for e in res.effects]
+    assert names[0] == name
+    e = res.effects[0]
+    (pname, true), = params.items()
+    lo, hi = e.ci[pname]
+    se = (hi - lo) / (2 * Z90)
+    # the interval is informative (a few % of the effect) and the estimate within 4 se
+    assert se < 0.05 * abs(true)
+    assert abs(e.params[pname] - true) <= 4 * se
+    assert e.delta_bic > 10 and e.delta_heldout > 0
+    assert res.after["std"] < 0.5 * res.before["std"]
+    assert res.explained
+
+
+def test_missed_counts_and_wrap_are_found():
+    log = _log(5, {"missed_counts": {"times": [3.0], "jumps": [2]}})
+    res = select_effects(log["t"], log["truth"], log["measured"], STEP, truth_step=TRUTH_STEP)
+    assert [e.name for e in res.effects] == ["missed_counts"]
+    assert res.effects[0].params["n_1"] == 2
+    assert res.effects[0].params["t_1"] == pytest.approx(3.0, abs=0.05)
+
+    rng = np.random.default_rng(6)
+    log = simulate_log(rng, lambda t: 2.8 + 1.0 * np.sin(2 * np.pi * 0.7 * t), duration=5.0, step=STEP,
+                       truth_step=TRUTH_STEP, effects={"wrap_around": {"period": 2 * np.pi}})
+    res = select_effects(log["t"], log["truth"], log["measured"], STEP, truth_step=TRUTH_STEP)
+    assert [e.name for e in res.effects] == ["wrap_around"]
+    assert res.effects[0].params["period"] == 2 * np.pi
+    assert res.explained
+
+
+def test_summary_block_and_prediction():
+    log = _log(8, {"latency": {"tau": 1e-3}})
+    res = select_effects(log["t"], log["truth"], log["measured"], STEP, truth_step=TRUTH_STEP)
+    block = json.loads(json.dumps(res.to_summary()))
+    assert set(block) >= {"metric", "before", "after", "effects"}
+    assert block["effects"][0]["name"] == "latency"
+    assert set(block["effects"][0]) >= {"name", "params", "ci", "delta_bic"}
+    pred = res.model_prediction()
+    r = log["measured"] - pred
+    assert np.std(r) == pytest.approx(res.after["std"])
+    # the same model applied to the same trajectory through the public arguments
+    np.testing.assert_allclose(res.model_prediction(log["t"], log["truth"]), pred)
+
+
+def test_truth_step_is_estimated_from_the_truth_grid():
+    log = _log(9)
+    assert sel.estimate_grid_step(log["truth"]) == pytest.approx(TRUTH_STEP, rel=1e-9)
+    assert sel.estimate_grid_step(np.sin(np.linspace(0, 1, 100))) == 0.0
+
+
+# ------------------------------------------------------------------------ input errors
+def test_bad_inputs_name_the_row():
+    t = np.arange(100) / 1000.0
+    truth = np.zeros(100)
+    meas = np.zeros(100)
+    t_bad = t.copy()
+    t_bad[40] = t_bad[39]
+    with pytest.raises(ValueError, match="row 40"):
+        select_effects(t_bad, truth, meas, STEP)
+    truth_bad = truth.copy()
+    truth_bad[7] = np.nan
+    with pytest.raises(ValueError, match="truth.*row 7"):
+        select_effects(t, truth_bad, meas, STEP)
+    meas_bad = meas + np.where(np.arange(100) >= 50, 0.3 * STEP, 0.0)
+    with pytest.raises(ValueError, match="not on a grid"):
+        select_effects(t, truth, meas_bad, STEP)
+    with pytest.raises(ValueError, match="unknown candidate"):
+        select_effects(t, truth, meas, STEP, candidates=["gremlins"])
+
+
+def test_long_log_is_fitted_on_a_subsample_with_full_statistics(monkeypatch):
+    monkeypatch.setattr(sel, "_MAX_FIT_SAMPLES", 2000)
+    log = _log(12, {"latency": {"tau": 1e-3}}, duration=6.0)
+    res = select_effects(log["t"], log["truth"], log["measured"], STEP, truth_step=TRUTH_STEP)
+    assert [e.name for e in res.effects][0] == "latency"
+    assert res.effects[0].params["tau"] == pytest.approx(1e-3, rel=0.05)
+    # the statistics are of the full log
+    assert np.std(log["measured"] - res.model_prediction()) == pytest.approx(res.after["std"])
+    assert res.model_prediction().size == log["t"].size
+
+
+def test_flickering_truth_keeps_its_direction_through_a_dwell():
+    t = np.arange(600) / 1000.0
+    ramp = np.concatenate([np.linspace(0, 0.1, 200), np.full(200, 0.1), np.linspace(0.1, 0.2, 200)])
+    truth = TRUTH_STEP * np.round(ramp / TRUTH_STEP)
+    rng = np.random.default_rng(0)
+    truth[200:400] += TRUTH_STEP * rng.integers(-1, 2, 200)  # one-count flicker while at rest
+    ctx = sel._make_ctx(t, truth, np.zeros(600, np.int64), STEP, TRUTH_STEP, {}, 0.0, None)
+    assert np.all(ctx.priv["_motion_sign"][20:580] == 1)
+    # a clean quantized truth gets no dead zone: the direction flips at the reversal itself
+    tri = TRUTH_STEP * np.round(np.concatenate([np.linspace(0, 0.1, 300), np.linspace(0.1, 0, 300)]) / TRUTH_STEP)
+    ctx = sel._make_ctx(t, tri, np.zeros(600, np.int64), STEP, TRUTH_STEP, {}, 0.0, None)
+    flip = np.flatnonzero(np.diff(ctx.priv["_motion_sign"]) != 0)
+    assert flip.size == 1 and abs(int(flip[0]) - 299) <= 2

@@ -1,0 +1,622 @@
+"""Effect library: composable terms of the measured-channel model (DESIGN 2.3).
+
+The measured channel with step ``step`` reads the count ``k = floor(theta_eff / step + c)``
+of an *effective* angle ``theta_eff``: the truth angle changed by the effects below, in the
+order of their ``order`` attribute (mechanics first, then the sensor, then the counter).
+``c`` is the quantizer offset in counts (a nuisance fitted with every model, see
+:mod:`enclab.residuals.select`). Three kinds of effect exist:
+
+``shift``
+    ``apply(theta, t, velocity, aux, params)`` returns the modified angle (rad).
+``noise``
+    ``noise_std(theta, t, velocity, aux, params)`` returns an extra per-sample standard
+    deviation of the angle (rad) that enters the likelihood's jitter.
+``discrete``
+    shifts whose parameters are found by a search (changepoint times, a wrap period), not by
+    a continuous optimiser; they still provide ``apply``.
+
+``aux`` is a dict of extra channels (e.g. ``{"torque": array}``) plus private entries the
+selection fills: ``"_step"`` (measured step, rad), ``"_offset"`` (``c``, counts),
+``"_counts"`` (measured counts), ``"_theta_ref"`` (reference angle of the scale term, rad),
+``"_line_pitch"`` (rad).
+
+Each effect documents its *signature*: what the residual ``measured - truth`` looks like
+when the effect is present and not modelled. :meth:`Effect.signature` gives its linearisation
+``d theta_eff / d params`` at the null (effect absent), which the selection regresses the
+residual on for a starting guess.
+
+The module also holds the motion terms of the sinusoid (LRDE) fit: harmonic distortion and
+linear frequency drift (:func:`drift_phase`, :func:`distorted_sinusoid`).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = [
+    "Effect",
+    "TruthQuantization",
+    "Hysteresis",
+    "Backlash",
+    "AngleHarmonics",
+    "LinePitchHarmonics",
+    "QuadratureEdges",
+    "Latency",
+    "TimestampJitter",
+    "ScaleMismatch",
+    "Compliance",
+    "MissedCounts",
+    "WrapAround",
+    "EFFECTS",
+    "play_operator",
+    "motion_sign",
+    "drift_phase",
+    "distorted_sinusoid",
+]
+
+
+def motion_sign(velocity) -> np.ndarray:
+    """Sign of the last non-zero velocity (+1/-1), 0 before the first motion.
+
+    A dwell keeps the direction of the motion that ended in it: the memory of a dead band
+    or of a gear's play.
+    """
+    v = np.asarray(velocity, dtype=float)
+    s = np.sign(v)
+    idx = np.where(s != 0, np.arange(s.size), -1)
+    np.maximum.accumulate(idx, out=idx)
+    out = np.where(idx >= 0, s[np.maximum(idx, 0)], 0.0)
+    return out
+
+
+def play_operator(x, width: float, y0: float | None = None) -> np.ndarray:
+    """Play (backlash) operator of width ``width >= 0`` applied to the input ``x``.
+
+    ``y_i = min(max(y_{i-1}, x_i - width/2), x_i + width/2)`` with ``y_0 = x_0`` (or ``y0``).
+    The output stays still after a reversal until the input has moved ``width``, then follows
+    it ``width/2`` behind.
+
+    Notes
+    -----
+    Computed run by run: on a run where ``x`` does not decrease the recursion reduces to
+    ``y_i = max(y_start, x_i - width/2)`` (``x_i + width/2`` never binds since ``x`` rose),
+    and symmetrically on a non-increasing run, so the cost is one vectorised pass per
+    monotone run rather than one Python step per sample.
+    """
+    x = np.asarray(x, dtype=float)
+    if width < 0:
+        raise ValueError(f"play width must be >= 0, got width={width!r}")
+    n = x.size
+    y = np.empty(n)
+    if n == 0:
+        return y
+    half = 0.5 * width
+    prev = x[0] if y0 is None else float(np.clip(y0, x[0] - half, x[0] + half))
+    d = np.diff(x)
+    nz = np.flatnonzero(d)
+    # run boundaries: where the sign of the non-zero increments changes
+    if nz.size == 0:
+        y[:] = prev
+        return y
+    sgn = np.sign(d[nz])
+    change = nz[1:][sgn[1:] != sgn[:-1]]  # index i of d[i] starting a new direction
+    starts = np.concatenate(([1], change + 1))
+    ends = np.concatenate((change + 1, [n]))
+    dirs = np.concatenate(([sgn[0]], sgn[1:][sgn[1:] != sgn[:-1]]))
+    y[0] = prev
+    for s, e, dr in zip(starts, ends, dirs):
+        seg = x[s:e]
+        if dr > 0:
+            y[s:e] = np.maximum(prev, seg - half)
+        else:
+            y[s:e] = np.minimum(prev, seg + half)
+        prev = y[e - 1]
+    return y
+
+
+class Effect:
+    """Base class of an effect term.
+
+    Attributes
+    ----------
+    name : str
+        Identifier used in reports and in ``candidates``.
+    param_names : tuple of str
+        Names of the free parameters (SI units: rad, s, 1).
+    kind : {"shift", "noise", "discrete"}
+    order : int
+        Position in the composition (lower is applied first).
+    boundary : tuple of str
+        Parameters whose null value (0) lies on the boundary of their range: the likelihood
+        ratio there follows a 50:50 mixture of chi2 with one degree of freedom fewer and
+        chi2 (Self & Liang 1987).
+    """
+
+    name = "effect"
+    param_names: tuple = ()
+    kind = "shift"
+    order = 50
+    boundary: tuple = ()
+
+    def applicable(self, ctx) -> bool:
+        """Whether the effect can be fitted with the data in ``ctx`` (default: yes)."""
+        return True
+
+    def null(self) -> np.ndarray:
+        """Parameter values at which the effect vanishes."""
+        return np.zeros(len(self.param_names))
+
+    def bounds(self, ctx) -> list[tuple[float, float]]:
+        """Search range of each parameter, from the scales of the log in ``ctx``."""
+        raise NotImplementedError
+
+    def fd_steps(self, ctx) -> np.ndarray:
+        """Finite-difference steps of the parameters (a small fraction of the range)."""
+        return np.array([1e-4 * (hi - lo) for lo, hi in self.bounds(ctx)])
+
+    def apply(self, theta, t, velocity, aux, params):
+        """Modified angle (rad); identity for noise effects."""
+        return theta
+
+    def noise_std(self, theta, t, velocity, aux, params):
+        """Extra per-sample angle jitter (rad); zero for shift effects."""
+        return None
+
+    def signature(self, theta, t, velocity, aux, ctx) -> np.ndarray:
+        """Columns ``d theta_eff / d p`` at the null, shape (N, n_params), by central differences."""
+        p0 = self.null()
+        h = self.fd_steps(ctx)
+        cols = []
+        for j in range(p0.size):
+            up, dn = p0.copy(), p0.copy()
+            up[j] += h[j]
+            dn[j] -= h[j]
+            cols.append((self.apply(theta, t, velocity, aux, up) - self.apply(theta, t, velocity, aux, dn)) / (2 * h[j]))
+        return np.column_stack(cols) if cols else np.zeros((np.size(theta), 0))
+
+    def derived(self, params: dict) -> dict:
+        """Extra derived quantities for reports (e.g. amplitude and phase)."""
+        return {}
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}()"
+
+
+class TruthQuantization(Effect):
+    """Quantization of the truth channel with step ``truth_step``: no free parameter.
+
+    The true angle lies in ``truth + U(-truth_step/2, truth_step/2)``, so the predicted
+    count flips near the measured thresholds and the residual against the exact model gets
+    the variance of those flips. Signature: residual non-zero only where the truth is within
+    ``truth_step/2`` of a measured threshold. The selection always includes it in the exact-model
+    floor (it is part of the exact model, not hardware); it adds ``truth_step**2 / 12`` to
+    the angle's jitter.
+    """
+
+    name = "truth_quantization"
+    kind = "noise"
+    order = 0
+
+    def applicable(self, ctx) -> bool:
+        return bool(ctx.truth_step)
+
+    def bounds(self, ctx):
+        return []
+
+    def noise_std(self, theta, t, velocity, aux, params):
+        return np.full(np.shape(theta), aux.get("_truth_step", 0.0) / math.sqrt(12.0))
+
+
+class Hysteresis(Effect):
+    """Dead band / hysteresis of width ``h`` (rad): ``theta_eff = theta - (h/2) sign(v)``.
+
+    ``sign(v)`` is the direction of the last motion (memory through dwells). Signature:
+    residual ``measured - truth`` is ``-h/2`` on rising motion and ``+h/2`` on falling motion,
+    a step at each reversal. ``h`` is signed: positive means the measured channel lags the
+    truth, negative that it leads; ``h = 0`` is therefore an interior point (regular chi2_1).
+    """
+
+    name = "hysteresis"
+    param_names = ("h",)
+    order = 10
+
+    def bounds(self, ctx):
+        lim = 20.0 * ctx.step
+        return [(-lim, lim)]
+
+    def apply(self, theta, t, velocity, aux, params):
+        return theta - 0.5 * params[0] * aux["_motion_sign"]
+
+
+class Backlash(Effect):
+    """Backlash (play operator) of signed width ``w`` (rad) between truth and measured side.
+
+    ``w > 0``: the measured side is driven through a play of width ``w``:
+    ``theta_eff = play_w(theta)``; ``w < 0``: the measured side drives,
+    ``theta_eff = 2 theta - play_|w|(theta)``. Signature: after each reversal the residual
+    moves by ``w`` over an input travel of ``|w|`` (a ramp, unlike the instant step of the
+    hysteresis) and then stays at ``-w/2`` (rising) or ``+w/2`` (falling). Both signs are
+    physical and the two branches join smoothly at ``w = 0`` (interior null, regular chi2_1).
+    """
+
+    name = "backlash"
+    param_names = ("w",)
+    order = 11
+    # the play operator is non-linear in w: the linearised guess can land in a worse basin
+    multistart = True
+
+    def bounds(self, ctx):
+        lim = 20.0 * ctx.step
+        return [(-lim, lim)]
+
+    def apply(self, theta, t, velocity, aux, params):
+        w = float(params[0])
+        p = play_operator(theta, abs(w))
+        return p if w >= 0 else 2.0 * theta - p
+
+    def derived(self, params):
+        return {"play_width": abs(params["w"])}
+
+
+class AngleHarmonics(Effect):
+    """Once- and twice-per-revolution error (eccentricity, tilt): four coefficients (rad).
+
+    ``theta_eff = theta + a1 cos(theta) + b1 sin(theta) + a2 cos(2 theta) + b2 sin(2 theta)``.
+    Signature: residual periodic in ``theta mod 2 pi`` with one and two cycles per
+    revolution. Linear coefficients (not amplitude/phase) keep the null interior and regular;
+    amplitudes and phases are reported as derived values.
+    """
+
+    name = "angle_harmonics"
+    param_names = ("a1", "b1", "a2", "b2")
+    order = 20
+
+    def applicable(self, ctx) -> bool:
+        # a harmonic of the angle is only told apart from a constant on a travel of >= ~1 rad
+        return float(np.ptp(ctx.truth)) >= 1.0
+
+    def bounds(self, ctx):
+        lim = 20.0 * ctx.step
+        return [(-lim, lim)] * 4
+
+    def apply(self, theta, t, velocity, aux, params):
+        a1, b1, a2, b2 = params
+        return theta + a1 * np.cos(theta) + b1 * np.sin(theta) + a2 * np.cos(2 * theta) + b2 * np.sin(2 * theta)
+
+    def derived(self, params):
+        return {
+            "amp1": math.hypot(params["a1"], params["b1"]),
+            "phase1": math.atan2(params["a1"], params["b1"]),
+            "amp2": math.hypot(params["a2"], params["b2"]),
+            "phase2": math.atan2(params["a2"], params["b2"]),
+        }
+
+
+class LinePitchHarmonics(Effect):
+    """Interpolation / sub-division error periodic in the line pitch ``P`` (rad).
+
+    ``theta_eff = theta + a cos(2 pi theta / P) + b sin(2 pi theta / P)``; ``P`` defaults to
+    four counts (one line of a quadrature encoder) and can be given as ``line_pitch``
+    (e.g. an interpolated encoder with 16 counts per line). At four counts it coincides with
+    :class:`QuadratureEdges` on the thresholds and is not a separate candidate.
+    Signature: residual periodic in ``theta mod P``.
+    """
+
+    name = "line_pitch_harmonics"
+    param_names = ("a", "b")
+    order = 30
+
+    def applicable(self, ctx) -> bool:
+        # The count depends on the angle only at the thresholds; at a pitch of four counts a
+        # harmonic of the line is the pattern e = (a, b, -a, -b) of QuadratureEdges, so the two
+        # cannot be told apart and only the quadrature pattern (its superset) is a candidate.
+        pitch = ctx.priv["_line_pitch"]
+        return abs(pitch / ctx.step - 4.0) > 1e-6 and pitch > 2.0 * ctx.step
+
+    def bounds(self, ctx):
+        lim = 2.0 * ctx.step
+        return [(-lim, lim)] * 2
+
+    def apply(self, theta, t, velocity, aux, params):
+        w = 2.0 * np.pi * theta / aux["_line_pitch"]
+        return theta + params[0] * np.cos(w) + params[1] * np.sin(w)
+
+    def derived(self, params):
+        return {"amplitude": math.hypot(params["a"], params["b"]), "phase": math.atan2(params["a"], params["b"])}
+
+
+class QuadratureEdges(Effect):
+    """Quadrature edge-spacing error: the edge into count ``m`` is displaced by ``e_{m mod 4}``.
+
+    Three free displacements ``e0, e1, e2`` (rad); ``e3 = -(e0 + e1 + e2)`` since a common
+    shift of all four edges is the quantizer offset. Implemented as
+    ``theta_eff = theta - e_{m mod 4}`` with ``m`` the nearest threshold index
+    ``floor(theta/step + c + 1/2)``: exact for ``|e| < step/2``. Signature: residual that
+    repeats every four counts of the measured channel.
+    """
+
+    name = "quadrature_edges"
+    param_names = ("e0", "e1", "e2")
+    order = 40
+
+    def bounds(self, ctx):
+        lim = 0.45 * ctx.step
+        return [(-lim, lim)] * 3
+
+    def apply(self, theta, t, velocity, aux, params):
+        e = np.array([params[0], params[1], params[2], -(params[0] + params[1] + params[2])])
+        m = np.floor(theta / aux["_step"] + aux["_offset"] + 0.5).astype(np.int64) % 4
+        return theta - e[m]
+
+    def derived(self, params):
+        return {"e3": -(params["e0"] + params["e1"] + params["e2"])}
+
+
+class Latency(Effect):
+    """Latency or channel skew ``tau`` (s): the measured channel reads the angle ``tau`` late.
+
+    ``theta_eff(t) = theta(t - tau) ~ theta - tau v``. Signature: residual ``-tau v``,
+    proportional to velocity. ``tau`` is signed (the measured channel may lead).
+    """
+
+    name = "latency"
+    param_names = ("tau",)
+    order = 25
+
+    def applicable(self, ctx) -> bool:
+        return float(np.max(np.abs(ctx.velocity))) > 0
+
+    def bounds(self, ctx):
+        vmax = float(np.max(np.abs(ctx.velocity)))
+        lim = 20.0 * ctx.step / vmax
+        return [(-lim, lim)]
+
+    def apply(self, theta, t, velocity, aux, params):
+        return theta - params[0] * velocity
+
+
+class TimestampJitter(Effect):
+    """Timestamp jitter of standard deviation ``sigma_t >= 0`` (s).
+
+    A sample stamped at ``t`` was taken at ``t + N(0, sigma_t^2)``: the angle gets a jitter
+    ``sigma_t |v|``. Signature: residual variance growing with ``v^2`` and zero mean. The null
+    ``sigma_t = 0`` is on the boundary of the range (mixture null, see :class:`Effect`).
+    """
+
+    name = "timestamp_jitter"
+    param_names = ("sigma_t",)
+    kind = "noise"
+    order = 26
+    boundary = ("sigma_t",)
+
+    def applicable(self, ctx) -> bool:
+        return float(np.max(np.abs(ctx.velocity))) > 0
+
+    def bounds(self, ctx):
+        vmax = float(np.max(np.abs(ctx.velocity)))
+        return [(0.0, 20.0 * ctx.step / vmax)]
+
+    def noise_std(self, theta, t, velocity, aux, params):
+        return abs(params[0]) * np.abs(velocity)
+
+    def signature(self, theta, t, velocity, aux, ctx):
+        return np.zeros((np.size(theta), 1))
+
+
+class ScaleMismatch(Effect):
+    """Scale (counts-per-rev or gear-ratio) mismatch ``g`` (dimensionless).
+
+    ``theta_eff = theta + g (theta - theta_ref)`` with ``theta_ref`` the mean truth angle, so
+    that ``g`` does not trade off against the quantizer offset. Signature: residual a ramp
+    in the angle.
+    """
+
+    name = "scale_mismatch"
+    param_names = ("g",)
+    order = 21
+
+    def applicable(self, ctx) -> bool:
+        return float(np.ptp(ctx.truth)) > 4.0 * ctx.step
+
+    def bounds(self, ctx):
+        lim = 20.0 * ctx.step / max(float(np.ptp(ctx.truth)), ctx.step)
+        return [(-lim, lim)]
+
+    def apply(self, theta, t, velocity, aux, params):
+        return theta + params[0] * (theta - aux["_theta_ref"])
+
+
+class Compliance(Effect):
+    """Compliance against a logged torque: ``theta_eff = theta + kappa (torque - mean)``.
+
+    ``kappa`` in rad per torque unit. Applicable only with ``aux["torque"]``. Signature:
+    residual proportional to the torque.
+    """
+
+    name = "compliance"
+    param_names = ("kappa",)
+    order = 12
+
+    def applicable(self, ctx) -> bool:
+        tq = ctx.aux.get("torque") if ctx.aux else None
+        return tq is not None and float(np.ptp(tq)) > 0
+
+    def bounds(self, ctx):
+        lim = 20.0 * ctx.step / float(np.ptp(ctx.aux["torque"]))
+        return [(-lim, lim)]
+
+    def apply(self, theta, t, velocity, aux, params):
+        tq = aux["torque"]
+        return theta + params[0] * (tq - aux["_torque_ref"])
+
+
+class MissedCounts(Effect):
+    """Missed (or extra) counts: integer steps of the count at unknown times.
+
+    Parameters ``t_1, n_1, ..., t_K, n_K``: after ``t_j`` the measured count is lower by
+    ``n_j`` (an integer). Found by binary segmentation of the count residual (see
+    :meth:`detect`); each changepoint costs two parameters in the BIC. Signature: the residual
+    jumps by a whole number of steps and stays there.
+    """
+
+    name = "missed_counts"
+    kind = "discrete"
+    order = 60
+
+    def __init__(self, times=(), jumps=()):
+        self.times = tuple(float(x) for x in times)
+        self.jumps = tuple(int(x) for x in jumps)
+        self.param_names = tuple(p for j in range(len(self.times)) for p in (f"t_{j + 1}", f"n_{j + 1}"))
+
+    def bounds(self, ctx):
+        return []
+
+    def apply(self, theta, t, velocity, aux, params=None):
+        shift = np.zeros(np.shape(theta))
+        for tj, nj in zip(self.times, self.jumps):
+            shift = shift + nj * (t >= tj)
+        return theta - aux["_step"] * shift
+
+    @staticmethod
+    def detect(t, resid_counts, max_changes: int = 4, min_len: int = 20):
+        """Changepoints of an integer level in ``resid_counts`` (counts) by binary segmentation.
+
+        Returns ``(times, jumps)``: at each accepted change the median level on either side
+        differs by a non-zero whole number of counts, and every segment between changes sits
+        on its level (at least 80 % of its samples within half a count of its median);
+        otherwise no change is returned.
+        """
+        r = np.asarray(resid_counts, dtype=float)
+        segments = [(0, r.size)]
+        cps = []
+        for _ in range(max_changes):
+            best = None
+            for a, b in segments:
+                if b - a < 2 * min_len:
+                    continue
+                seg = r[a:b]
+                cs = np.cumsum(seg - seg.mean())
+                i = int(np.argmax(np.abs(cs[min_len - 1 : b - a - min_len]))) + min_len
+                jump = np.median(seg[i:]) - np.median(seg[:i])
+                score = abs(cs[i - 1])
+                if round(jump) != 0 and (best is None or score > best[0]):
+                    best = (score, a, b, a + i, int(round(jump)))
+            if best is None:
+                break
+            _, a, b, cp, jump = best
+            cps.append((cp, jump))
+            segments.remove((a, b))
+            segments += [(a, cp), (cp, b)]
+        cps.sort()
+        # a missed count leaves a piecewise-constant integer residual: every segment must sit
+        # on its level (>= 80 % of samples within half a count); a residual that alternates
+        # with the direction of motion (backlash, hysteresis) is no missed count
+        bounds = [0] + [cp for cp, _ in cps] + [r.size]
+        for a, b in zip(bounds[:-1], bounds[1:]):
+            seg = r[a:b]
+            if np.mean(np.abs(seg - np.median(seg)) <= 0.5) < 0.8:
+                return [], []
+        times, jumps = [], []
+        for cp, jump in cps:
+            times.append(float(t[cp]))
+            jumps.append(-jump)  # measured lower by n after t: residual (measured - model) drops by n
+        return times, jumps
+
+
+class WrapAround(Effect):
+    """Counter or angle wrap-around with period ``P`` (rad): modular jumps of the measured channel.
+
+    ``theta_eff = theta - P round((theta/step + c - k) step / P)``: the model is compared with
+    the counts modulo ``P``. ``P`` is snapped to ``2 pi`` or a counter range ``2**b`` counts
+    when the observed jumps are within 1 % of one. Signature: the residual jumps by (nearly)
+    a fixed large amount ``P`` and back.
+    """
+
+    name = "wrap_around"
+    param_names = ("period",)
+    kind = "discrete"
+    order = 70
+
+    def __init__(self, period: float | None = None):
+        self.period = period
+
+    def bounds(self, ctx):
+        return []
+
+    def apply(self, theta, t, velocity, aux, params=None):
+        step = aux["_step"]
+        mu = theta / step + aux["_offset"]
+        n = np.round((mu - aux["_counts"]) * step / self.period)
+        return theta - self.period * n
+
+    @staticmethod
+    def detect(truth, measured, step: float):
+        """Period from the jumps of ``measured`` that ``truth`` does not make, or None.
+
+        A jump is a sample-to-sample change of ``measured - truth`` larger than 16 steps; the
+        period is the median size of the jumps, snapped to ``2 pi`` or ``2**b`` steps within 1 %.
+        """
+        d = np.abs(np.diff(np.asarray(measured, float) - np.asarray(truth, float)))
+        big = d[d > 16.0 * step]
+        if big.size == 0:
+            return None
+        est = float(np.median(big))
+        for cand in [2.0 * np.pi] + [step * 2.0**b for b in range(4, 33)]:
+            if abs(est - cand) <= 0.01 * cand:
+                return cand
+        return round(est / step) * step
+
+
+# --------------------------------------------------------------------------- motion terms
+
+
+def drift_phase(t, f0_hz: float, phase: float, drift_hz_per_s: float = 0.0, t_ref: float = 0.0):
+    """Phase of a sinusoid with linear frequency drift.
+
+    ``phi(t) = phase + 2 pi (f0 (t - t_ref) + drift (t - t_ref)^2 / 2)``, so the
+    instantaneous frequency is ``f0 + drift (t - t_ref)`` Hz.
+    """
+    tau = np.asarray(t, dtype=float) - t_ref
+    return phase + 2.0 * np.pi * (f0_hz * tau + 0.5 * drift_hz_per_s * tau**2)
+
+
+def distorted_sinusoid(
+    t,
+    bias: float,
+    amplitude: float,
+    f0_hz: float,
+    phase: float,
+    drift_hz_per_s: float = 0.0,
+    a3: float = 0.0,
+    psi3: float = 0.0,
+    a2: float = 0.0,
+    psi2: float = 0.0,
+    t_ref: float = 0.0,
+):
+    """Sinusoidal motion with harmonic distortion and frequency drift.
+
+    ``theta(t) = b + A sin(phi) + A2 sin(2 phi + psi2) + A3 sin(3 phi + psi3)`` with ``phi``
+    from :func:`drift_phase`. With ``a2 = a3 = drift = 0`` it is the pure sinusoid of the
+    LRDE model. The terms are linear in ``(b, A, A2 cos psi2, A2 sin psi2, A3 cos psi3,
+    A3 sin psi3)`` for a fixed phase law, so a least-squares fit of them is exact given
+    ``f0``, ``phase`` and ``drift``.
+    """
+    phi = drift_phase(t, f0_hz, phase, drift_hz_per_s, t_ref)
+    return bias + amplitude * np.sin(phi) + a2 * np.sin(2 * phi + psi2) + a3 * np.sin(3 * phi + psi3)
+
+
+#: Candidate effects in the order the selection tries them (discrete ones last).
+EFFECTS = (
+    Hysteresis,
+    Backlash,
+    Compliance,
+    ScaleMismatch,
+    AngleHarmonics,
+    Latency,
+    TimestampJitter,
+    LinePitchHarmonics,
+    QuadratureEdges,
+    MissedCounts,
+    WrapAround,
+)

@@ -1,0 +1,259 @@
+"""Residual stage of one log: canonical log in, residual block, figures and table out.
+
+For each measured channel that has a truth channel on the same joint, the measured readings are
+compared with the exact quantizer model of that channel applied to the truth
+(:mod:`enclab.residuals.diagnostics`), then the effect library
+(:func:`enclab.residuals.select.select_effects`) looks for the effects that explain what is left,
+and the residual is reported before and after them.
+
+Settings (``config["residuals"]`` updated with the log's ``analysis.residuals``):
+
+``offset``
+    ``"fit"`` (default): the measured channel's constant offset (unknown counter zero and
+    rounding convention) is fitted, see :func:`enclab.residuals.diagnostics.fit_offset`; or a
+    number (rad) when the channel's zero is known.
+``line_pitch_counts``
+    Counts per line of the code disc (4 for quadrature decoding).
+``n_bins``
+    Bins over a revolution and over a line pitch.
+``alpha``, ``candidates``
+    Passed to ``select_effects`` (significance level; effect names to consider, null = all).
+``aux``
+    ``{library name: channel name}`` of extra channels handed to the effects (e.g.
+    ``{torque: torque_back}`` for compliance against a logged torque).
+``seed``
+    Root seed; each channel gets ``[seed, crc32(log_id/channel)]``.
+``step``
+    The measured channel's step (rad), only for a float channel without a detected grid.
+"""
+from __future__ import annotations
+
+import zlib
+from collections.abc import Callable, Mapping
+
+import numpy as np
+import pandas as pd
+
+__all__ = ["residual_pairs", "channel_values", "analyse_channel", "before_after_table", "format_effects",
+           "summary_block", "batch_rows"]
+
+METRIC = "std of (measured - exact-model prediction) [rad]"
+
+
+def residual_pairs(meta_or_entry: Mapping) -> list[dict]:
+    """``[{"measured", "truth", "joint"}]``: every measured channel with a truth channel on the
+    same joint (manifest order), the pairs the residual stage analyses.
+
+    Works on canonical metadata and on manifest entries (both list ``channels`` with ``name``,
+    ``role`` and ``joint``). A log whose ``analysis.residuals`` is ``false`` has none.
+    """
+    if (meta_or_entry.get("analysis") or {}).get("residuals", True) is False:
+        return []
+    chans = meta_or_entry["channels"]
+    truths = {c["joint"]: c["name"] for c in chans if c.get("role") == "truth"}
+    return [{"measured": c["name"], "truth": truths[c["joint"]], "joint": c["joint"]}
+            for c in chans if c.get("role") == "measured" and c.get("joint") in truths]
+
+
+def channel_values(df: pd.DataFrame, meta: Mapping, name: str) -> tuple[np.ndarray, float | None]:
+    """SI values of a canonical channel and its step (``None`` for a float channel)."""
+    chan = next((c for c in meta["channels"] if c["name"] == name), None)
+    if chan is None:
+        raise ValueError(f"log {meta.get('log_id')!r} has no channel {name!r}; channels "
+                         f"{[c['name'] for c in meta['channels']]}")
+    col = df[name].to_numpy()
+    if chan["storage"] == "counts":
+        return col.astype(np.float64) * float(chan["step"]), float(chan["step"])
+    return col.astype(np.float64), None
+
+
+def _selector() -> Callable:
+    from enclab.residuals.select import select_effects
+
+    return select_effects
+
+
+def _settings(settings: Mapping | None) -> dict:
+    out = {"offset": "fit", "line_pitch_counts": 4, "n_bins": 24, "alpha": 0.01, "candidates": None,
+           "aux": {}, "seed": 0, "step": None}
+    unknown = set(settings or {}) - set(out)
+    if unknown:
+        raise ValueError(f"residuals settings: unknown key(s) {sorted(unknown)}; expected {sorted(out)}")
+    out.update(settings or {})
+    return out
+
+
+def _effects_label(effects) -> str:
+    return ", ".join(e.name for e in effects) if effects else ""
+
+
+def format_effects(effects) -> str:
+    """``"backlash(w=0.01199 [0.01198, 0.012], dBIC=4.1e+04)"`` for the summary's effect dicts
+    (parameters with their 90 % intervals)."""
+    out = []
+    for e in effects or []:
+        ci = e.get("ci") or {}
+        params = ", ".join(
+            f"{k}={v:.4g}" + (f" [{ci[k][0]:.4g}, {ci[k][1]:.4g}]" if k in ci and ci[k] is not None else "")
+            for k, v in (e.get("params") or {}).items())
+        out.append(f"{e['name']}({params}, dBIC={e.get('delta_bic', float('nan')):.3g})")
+    return "; ".join(out)
+
+
+def analyse_channel(df: pd.DataFrame, meta: Mapping, pair: Mapping, settings: Mapping | None = None,
+                    selector: Callable | None = None) -> tuple[dict, dict, pd.DataFrame]:
+    """Residual of one measured channel against the exact model, before and after the effects.
+
+    Parameters
+    ----------
+    df, meta : DataFrame, dict
+        Canonical log (:func:`enclab.io.read_canonical`).
+    pair : dict
+        ``{"measured", "truth"}`` channel names (:func:`residual_pairs`).
+    settings : dict
+        See the module docstring.
+    selector : callable, optional
+        ``select_effects`` of the effect library (default); tests may pass another with the
+        same signature.
+
+    Returns
+    -------
+    block : dict
+        ``residuals.json``: channel names, steps, offset, the diagnostics before and after,
+        the selection (``to_summary()`` plus ``explained`` and ``message``).
+    figures : dict
+        ``diagnostics`` and ``before_after`` matplotlib Figures.
+    table : DataFrame
+        The before/after table: one row per stage with std, mean, rms, max |r| and the floor.
+
+    Raises
+    ------
+    ValueError
+        When the measured channel has no quantization step (a float channel without a grid and
+        no ``step`` setting), or the settings are unknown.
+    """
+    # Imported here: common.smk imports this module for residual_pairs on every DAG build.
+    from enclab.residuals import diagnostics as dg
+    from enclab.residuals import plots
+
+    cfg = _settings(settings)
+    log_id = meta.get("log_id", "?")
+    t = df["t"].to_numpy(dtype=np.float64)
+    truth, truth_step = channel_values(df, meta, pair["truth"])
+    measured, step = channel_values(df, meta, pair["measured"])
+    if step is None:
+        if cfg["step"] is None:
+            raise ValueError(
+                f"log {log_id!r}: measured channel {pair['measured']!r} has no quantization step "
+                "(a float channel without a detected grid); declare native_step in the manifest "
+                "or analysis.residuals.step")
+        step = float(cfg["step"])
+    if truth_step is not None and truth_step > step:
+        raise ValueError(f"log {log_id!r}: truth channel {pair['truth']!r} (step {truth_step:.6g} rad) "
+                         f"is coarser than measured channel {pair['measured']!r} (step {step:.6g} rad)")
+    offset = None if cfg["offset"] == "fit" else float(cfg["offset"])
+    diag = dg.diagnose(t, truth, measured, step, truth_step, offset=offset,
+                       line_pitch_counts=int(cfg["line_pitch_counts"]), n_bins=int(cfg["n_bins"]))
+    offset = diag["offset"]
+    aux = {key: channel_values(df, meta, name)[0] for key, name in (cfg["aux"] or {}).items()}
+    seed = [int(cfg["seed"]), zlib.crc32(f"{log_id}/{pair['measured']}".encode())]
+    select = selector or _selector()
+    # The offset is part of the exact model, not an effect: the library sees truth + c, so a
+    # counter's unknown zero never competes with the physical candidates.
+    res = select(t, truth + offset, measured, step, truth_step=truth_step, aux=aux or None,
+                 seed=int(np.random.SeedSequence(seed).generate_state(1)[0]),
+                 candidates=cfg["candidates"], alpha=float(cfg["alpha"]),
+                 line_pitch=int(cfg["line_pitch_counts"]) * step)
+    # On the log the selection ran on (its truth, aux channels and counts, so that effects
+    # needing the torque or the measured counts are included).
+    after_pred = np.asarray(res.model_prediction(), dtype=np.float64)
+    r_after = measured - after_pred
+    v = dg.velocity(t, truth)
+    after_diag = {"residual": dg.moments(r_after), "velocity_sign": dg.velocity_sign(v, r_after)}
+    selection = dict(res.to_summary())
+    selection.update(explained=bool(res.explained), message=str(res.message))
+    block = {
+        "log_id": log_id, "measured": pair["measured"], "truth": pair["truth"],
+        "step": step, "truth_step": truth_step, "offset": offset,
+        "offset_steps": offset / step,
+        "convention": "residual = measured - q(truth + offset), q rounds to the measured grid; "
+                      "error = measured - truth - offset; rad",
+        "before": dg.scalar_summary(diag),
+        "after": after_diag,
+        "selection": selection,
+    }
+    title = f"{log_id}: {pair['measured']} vs {pair['truth']}"
+    figures = {
+        "diagnostics": plots.diagnostics_figure(t, truth, diag, step, title=title),
+        "before_after": plots.before_after_figure(t, truth, measured, diag["prediction"], after_pred,
+                                                  step, title=title,
+                                                  effects_label=_effects_label(res.effects)),
+    }
+    table = before_after_table(log_id, pair, step, diag, r_after, res.before, res.after,
+                               selection["effects"])
+    return block, figures, table
+
+
+def before_after_table(log_id, pair, step, diag, r_after, lib_before, lib_after, effects) -> pd.DataFrame:
+    """One row per stage (exact model, with the selected effects) of one measured channel.
+
+    ``std``, ``mean``, ``rms``, ``max_abs`` are those of this stage's residual
+    (``measured - q(truth + c)`` before, ``measured - model_prediction`` after); ``floor_std``
+    and its interval are the effect library's (``SelectionResult.before/after``); ``effects``
+    lists the selected effects with their 90 % intervals.
+    """
+    from enclab.residuals import diagnostics as dg
+
+    rows = []
+    for stage, r, lib in (("before", diag["residual"], lib_before), ("after", r_after, lib_after)):
+        m = dg.moments(r)
+        floor = lib.get("floor_std", diag["floor"]["residual_std"])
+        ci = lib.get("floor_ci") or (None, None)
+        rows.append({"log_id": log_id, "measured": pair["measured"], "truth": pair["truth"],
+                     "stage": stage, "std": m["std"], "mean": m["mean"], "rms": m["rms"],
+                     "max_abs": m["max_abs"], "std_steps": m["std"] / step, "floor_std": floor,
+                     "floor_ci_lo": ci[0], "floor_ci_hi": ci[1],
+                     "std_over_floor": m["std"] / floor if floor else None,
+                     "effects": format_effects(effects) if stage == "after" else ""})
+    return pd.DataFrame(rows)
+
+
+def summary_block(blocks: list[Mapping]) -> dict | None:
+    """The ``residuals`` block of summary.json from the channel blocks of one log.
+
+    DESIGN section 3 keys (``metric``, ``before``, ``after``, ``effects``) are those of the
+    first measured channel (manifest order); every channel's block is under ``channels``.
+    """
+    if not blocks:
+        return None
+    per = {}
+    for b in blocks:
+        sel = dict(b["selection"])
+        sel.update(measured=b["measured"], truth=b["truth"], step=b["step"],
+                   truth_step=b["truth_step"], offset=b["offset"])
+        sel.setdefault("metric", METRIC)
+        per[b["measured"]] = sel
+    first = per[blocks[0]["measured"]]
+    return {**first, "channels": per}
+
+
+def batch_rows(summary: Mapping) -> list[dict]:
+    """Rows of ``results/batch/residuals.csv`` from one summary.json (one per measured channel)."""
+    block = summary.get("residuals")
+    if not block:
+        return []
+    rows = []
+    for name, sel in block["channels"].items():
+        before, after = sel.get("before") or {}, sel.get("after") or {}
+        effects = sel.get("effects") or []
+        floor = after.get("floor_std", before.get("floor_std"))
+        rows.append({
+            "log_id": summary["log_id"], "measured": name, "truth": sel.get("truth"),
+            "step": sel.get("step"), "truth_step": sel.get("truth_step"), "offset": sel.get("offset"),
+            "before_std": before.get("std"), "after_std": after.get("std"), "floor_std": floor,
+            "after_over_floor": (after.get("std") / floor) if floor and after.get("std") is not None else None,
+            "explained": sel.get("explained"),
+            "effects": format_effects(effects),
+            "message": sel.get("message"),
+        })
+    return rows

@@ -1,0 +1,860 @@
+"""Forward selection of the effects that explain a measured channel against a truth channel.
+
+Model
+-----
+The measured channel has step ``step`` and reads ``g + step * k`` with integer counts ``k``
+(``g`` is the grid phase of the readings, found from the data). The model predicts the
+continuous count coordinate ``mu = theta_eff / step + c`` where ``theta_eff`` is the truth
+changed by the chosen effects (:mod:`enclab.residuals.effects`) and ``c`` the quantizer offset
+in counts; the exact quantizer model reads ``floor(mu)``. The likelihood of each count is the
+interval probability
+
+    P(k | mu, s) = Phi((k + 1 - mu) / s) - Phi((k - mu) / s),
+
+with a Gaussian jitter ``s`` (counts) made of the truth channel's quantization
+(``truth_step^2 / 12``, the exact-model floor), the noise effects (timestamp jitter) and a small
+free nuisance jitter ``s_x`` that keeps the likelihood smooth and absorbs what no effect
+models. The Gaussian stands in for the uniform truth-quantization error in the likelihood
+only; the floor statistics below use the exact uniform-plus-Gaussian law.
+
+Criterion
+---------
+Every model is fitted by maximum likelihood (L-BFGS-B with an analytic derivative of the
+interval probability and finite differences of the effect terms). At each step every
+remaining candidate is fitted added to the current model; the one with the largest
+``delta_bic = 2 delta_loglik - k ln N`` is taken if
+
+* ``delta_bic > bic_threshold``,
+* the likelihood-ratio p-value is below ``alpha``; for a parameter whose null is on the
+  boundary of its range (timestamp jitter ``sigma_t >= 0``) the null law of the LR is the
+  50:50 mixture ``0.5 chi2_{k-1} + 0.5 chi2_k`` (Self & Liang 1987), otherwise ``chi2_k``;
+  discrete effects (changepoints, wrap period) have no chi2 law and use the BIC alone;
+* and the gain is confirmed on held-out data: time is cut into ``n_folds`` contiguous blocks,
+  both models are refitted without each block and scored on it; the summed held-out
+  log-likelihood gain must be positive. Contiguous blocks keep the autocorrelated residual of
+  one block out of the fit that scores it.
+
+If the best candidate fails, the next ones (by ``delta_bic``) are tried, at most
+``max_tries``. Selection stops when no candidate passes or when the residual already matches
+the exact-model floor within its interval (``SelectionResult.explained``).
+
+Intervals
+---------
+90 % intervals are Wald intervals with a sandwich covariance ``I^-1 B I^-1``: ``I`` is the
+outer product of per-sample scores and ``B`` the outer product of scores summed over ``40``
+contiguous blocks, so correlation of the residual within a block widens the interval. The
+larger of the model-based (``I^-1``) and sandwich variances is used. Intervals are clipped to
+the parameter range.
+
+Residual statistics
+-------------------
+``r = measured - prediction`` with prediction ``g + step * floor(mu)`` (the exact model), in
+rad. The floor is the distribution of ``r`` if the model were exact: with the true angle
+uniform within ``truth_step / 2`` of the truth and Gaussian noise effects, each sample's count
+is ``floor(mu) + j`` with probabilities computed in closed form, giving ``E[r_i]`` and
+``E[r_i^2]``. ``floor_std`` is the std this implies; its 90 % interval is from the standard
+error of ``mean(r_i^2 - E[r_i^2])`` over 20 contiguous blocks. ``explained`` holds when the
+residual variance is not above the floor's interval.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import optimize, signal, stats
+from scipy.special import log_ndtr, ndtr
+
+from enclab.residuals import effects as fx
+
+__all__ = ["select_effects", "SelectionResult", "FittedEffect", "residual_stats", "estimate_grid_step"]
+
+METRIC = "std of (measured - exact-model prediction)"
+_LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
+_Z90 = stats.norm.ppf(0.95)
+_CI_BLOCKS = 40
+_FLOOR_BLOCKS = 20
+_MAX_FIT_SAMPLES = 50_000
+_LOG_SX_BOUNDS = (-3.0, 1.5)
+
+
+@dataclass
+class FittedEffect:
+    """One chosen effect: parameters (SI), 90 % intervals, delta BIC and held-out gain (nats)."""
+
+    name: str
+    params: dict
+    ci: dict
+    delta_bic: float
+    delta_heldout: float
+    p_value: float = float("nan")
+    derived: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        return {
+            "name": self.name,
+            "params": {k: float(v) for k, v in self.params.items()},
+            "ci": {k: [float(v[0]), float(v[1])] for k, v in self.ci.items()},
+            "delta_bic": float(self.delta_bic),
+            "delta_heldout": float(self.delta_heldout),
+            "p_value": None if not np.isfinite(self.p_value) else float(self.p_value),
+            "derived": {k: float(v) for k, v in self.derived.items()},
+        }
+
+
+@dataclass
+class _Ctx:
+    t: np.ndarray
+    truth: np.ndarray
+    velocity: np.ndarray
+    step: float
+    truth_step: float
+    counts: np.ndarray
+    grid: float
+    aux: dict
+    priv: dict
+    fit_idx: np.ndarray
+
+    @property
+    def n(self):
+        return self.t.size
+
+
+class _Model:
+    """Effects with their parameter slices in the free vector ``x = [c, log10 s_x, ...]``."""
+
+    def __init__(self, effects):
+        self.effects = sorted(effects, key=lambda e: e.order)
+        self.slices = []
+        i = 2
+        for e in self.effects:
+            k = len(e.param_names) if e.kind != "discrete" else 0
+            self.slices.append(slice(i, i + k))
+            i += k
+        self.size = i
+
+    def n_params(self):
+        # discrete effects count their parameters in the BIC although they are not in x
+        return self.size + sum(len(e.param_names) for e in self.effects if e.kind == "discrete")
+
+    def bounds(self, ctx):
+        b = [(-math.inf, math.inf), _LOG_SX_BOUNDS]
+        for e in self.effects:
+            if e.kind != "discrete":
+                b += e.bounds(ctx)
+        return b
+
+    def scales(self, ctx):
+        sc = [1.0, 1.0]
+        for e in self.effects:
+            if e.kind != "discrete":
+                sc += [(hi - lo) / 40.0 for lo, hi in e.bounds(ctx)]
+        return np.array(sc)
+
+    def forward(self, ctx, x):
+        """Count coordinate ``mu`` and jitter ``s`` (counts) for every sample."""
+        priv = dict(ctx.priv)
+        priv["_offset"] = x[0]
+        aux = {**ctx.aux, **priv}
+        theta = ctx.truth
+        # s is the Gaussian part only; the truth channel's uniform error enters _loglik_terms
+        var = np.full(ctx.n, (10.0 ** x[1]) ** 2)
+        for e, sl in zip(self.effects, self.slices):
+            p = x[sl]
+            if e.kind == "noise":
+                sd = e.noise_std(theta, ctx.t, ctx.velocity, aux, p)
+                var = var + (sd / ctx.step) ** 2
+            else:
+                theta = e.apply(theta, ctx.t, ctx.velocity, aux, p)
+        return theta / ctx.step + x[0], np.sqrt(var)
+
+    def noise_var(self, ctx, x):
+        """Angle variance (rad^2) of the noise effects alone (no nuisance jitter)."""
+        aux = {**ctx.aux, **ctx.priv, "_offset": x[0]}
+        var = np.zeros(ctx.n)
+        for e, sl in zip(self.effects, self.slices):
+            if e.kind == "noise":
+                var = var + e.noise_std(ctx.truth, ctx.t, ctx.velocity, aux, x[sl]) ** 2
+        return var
+
+    def params_of(self, x, e_index):
+        e, sl = self.effects[e_index], self.slices[e_index]
+        if e.kind == "discrete":
+            if isinstance(e, fx.MissedCounts):
+                out = {}
+                for j, (tj, nj) in enumerate(zip(e.times, e.jumps)):
+                    out[f"t_{j + 1}"], out[f"n_{j + 1}"] = tj, float(nj)
+                return out
+            return {"period": float(e.period)}
+        return dict(zip(e.param_names, (float(v) for v in x[sl])))
+
+
+def _log_interval_prob(lower, upper):
+    """``log(Phi(upper) - Phi(lower))`` for ``lower < upper``, accurate in both tails and for
+    narrow intervals far out (no one-bound shortcut: the density of the uniform-plus-Gaussian
+    law needs intervals of width ``2 h / s`` many sigmas out)."""
+    flip = lower > 0
+    lo, up = np.where(flip, -upper, lower), np.where(flip, -lower, upper)
+    log_up = log_ndtr(up)
+    with np.errstate(divide="ignore"):
+        return log_up + np.log1p(-np.exp(np.minimum(log_ndtr(lo) - log_up, 0.0)))
+
+
+def _log_g(u):
+    """log of ``G(u) = u Phi(u) + phi(u)`` (the integral of Phi), accurate for u << 0."""
+    u = np.asarray(u, dtype=float)
+    out = np.empty_like(u)
+    deep = u < -10.0
+    ud = u[deep]
+    inv = 1.0 / (ud * ud)
+    # asymptotic series G(u) = phi(u) / u^2 (1 - 3/u^2 + 15/u^4 - 105/u^6 + 945/u^8), rel. err < 1e-7
+    out[deep] = (-0.5 * ud * ud - _LOG_SQRT_2PI - np.log(ud * ud)
+                 + np.log1p(inv * (-3.0 + inv * (15.0 + inv * (-105.0 + 945.0 * inv)))))
+    us = u[~deep]
+    with np.errstate(divide="ignore"):
+        out[~deep] = np.log(us * ndtr(us) + np.exp(-0.5 * us * us - _LOG_SQRT_2PI))
+    return out
+
+
+def _log_cdf_neg(x, half, sigma):
+    """log P(U + N < x) for ``x <= 0``, U ~ uniform(-half, half), N ~ N(0, sigma^2)."""
+    u1, u2 = (x + half) / sigma, (x - half) / sigma
+    g1, g2 = _log_g(u1), _log_g(u2)
+    with np.errstate(divide="ignore"):
+        return np.log(sigma / (2.0 * half)) + g1 + np.log1p(-np.exp(np.minimum(g2 - g1, 0.0)))
+
+
+def _log_interval_ug(a, b, half, sigma):
+    """log P(a <= U + N < b), ``a < b``, accurate in both tails (symmetry flips a > 0)."""
+    flip = a > 0
+    lo, up = np.where(flip, -b, a), np.where(flip, -a, b)
+    log_lo = _log_cdf_neg(np.minimum(lo, 0.0), half, sigma)
+    up_neg = up <= 0
+    log_up = np.where(up_neg, _log_cdf_neg(np.minimum(up, 0.0), half, sigma), 0.0)
+    # for up > 0: F(up) = 1 - F(-up)
+    pos = ~up_neg
+    if np.any(pos):
+        log_up[pos] = np.log1p(-np.exp(_log_cdf_neg(-up[pos], half, sigma[pos] if np.ndim(sigma) else sigma)))
+    with np.errstate(divide="ignore"):
+        return log_up + np.log1p(-np.exp(np.minimum(log_lo - log_up, 0.0)))
+
+
+def _loglik_terms(ctx, mu, s, idx):
+    """Per-sample log P(count | mu) and its derivatives in ``mu`` and in the jitter ``s``.
+
+    The perturbation of ``mu`` is the truth channel's uniform error (half-width
+    ``truth_step / (2 step)`` counts) plus a Gaussian of std ``s``; with no truth quantization
+    (or one far below ``s``) it is the Gaussian alone with the uniform's variance added.
+    """
+    k = ctx.counts[idx].astype(float)
+    m, sd = mu[idx], s[idx]
+    a, b = k - m, k + 1.0 - m
+    half = 0.5 * ctx.truth_step / ctx.step
+    if half < 1e-3 * float(np.min(sd)):
+        sg = np.sqrt(sd * sd + half * half / 3.0)
+        az, bz = a / sg, b / sg
+        ll = _log_interval_prob(az, bz)
+        pa = np.exp(np.minimum(-0.5 * az * az - _LOG_SQRT_2PI - ll, 700.0))
+        pb = np.exp(np.minimum(-0.5 * bz * bz - _LOG_SQRT_2PI - ll, 700.0))
+        dmu = (pa - pb) / sg
+        ds = (az * pa - bz * pb) / sg * (sd / sg)
+        return ll, dmu, ds
+    # samples whose count interval holds mu with > 10 sigma to spare on both sides have
+    # P = 1 - O(Phi(-10)) = 1 - 8e-24: log P and its derivatives are 0 to double precision
+    reach = half + 10.0 * sd
+    active = (a > -reach) | (b < reach)
+    ll, dmu, ds = np.zeros(a.size), np.zeros(a.size), np.zeros(a.size)
+    if np.any(active):
+        ll[active], dmu[active], ds[active] = _ug_terms(a[active], b[active], half, sd[active])
+    return ll, dmu, ds
+
+
+def _ug_terms(a, b, half, sd):
+    """log P(a <= U + N < b) and its derivatives in mu (= -d/da - d/db) and in sd."""
+    ll = _log_interval_ug(a, b, half, sd)
+    log2h = math.log(2.0 * half)
+
+    def dens(x):  # log f(x), f the density of U + N
+        return _log_interval_prob((x - half) / sd, (x + half) / sd) - log2h
+
+    def ratio(logv):
+        return np.exp(np.minimum(logv - ll, 700.0))
+
+    dmu = ratio(dens(a)) - ratio(dens(b))
+
+    def dphi(x):  # (phi((x + h)/s) - phi((x - h)/s)) / (2h) / P
+        u1, u2 = (x + half) / sd, (x - half) / sd
+        return ratio(-0.5 * u1 * u1 - _LOG_SQRT_2PI - log2h) - ratio(-0.5 * u2 * u2 - _LOG_SQRT_2PI - log2h)
+
+    ds = dphi(b) - dphi(a)
+    return ll, dmu, ds
+
+
+def _scores(model, ctx, x, scales, idx):
+    """Log-likelihood, its gradient in scaled coordinates and per-sample scores."""
+    mu, s = model.forward(ctx, x)
+    ll, dmu, ds = _loglik_terms(ctx, mu, s, idx)
+    g = np.empty((idx.size, x.size))
+    for j in range(x.size):
+        h = 1e-4 * scales[j]
+        xp = x.copy()
+        xp[j] += h
+        mu_p, s_p = model.forward(ctx, xp)
+        g[:, j] = (dmu * (mu_p[idx] - mu[idx]) + ds * (s_p[idx] - s[idx])) / h * scales[j]
+    return float(ll.sum()), g
+
+
+def _fit(model, ctx, x0, idx=None, maxiter=200):
+    """Maximum-likelihood fit of the free vector; returns (x, loglik)."""
+    idx = ctx.fit_idx if idx is None else idx
+    bounds = model.bounds(ctx)
+    scales = model.scales(ctx)
+    lo = np.array([b[0] for b in bounds]) / scales
+    hi = np.array([b[1] for b in bounds]) / scales
+    z0 = np.clip(np.asarray(x0, float) / scales, lo, hi)
+
+    def fun(z):
+        x = z * scales
+        ll, g = _scores(model, ctx, x, scales, idx)
+        if not np.isfinite(ll):
+            return 1e300, np.zeros_like(z)
+        return -ll, -g.sum(axis=0)
+
+    res = optimize.minimize(fun, z0, jac=True, method="L-BFGS-B", bounds=list(zip(lo, hi)),
+                            options={"maxiter": maxiter})
+    x = res.x * scales
+    return x, -float(res.fun)
+
+
+def _loglik(model, ctx, x, idx):
+    mu, s = model.forward(ctx, x)
+    return float(_loglik_terms(ctx, mu, s, idx)[0].sum())
+
+
+def _initial_effect_params(e, model, ctx, x_cur):
+    """Starting values: regression of the continuous residual on the effect's signature."""
+    bounds = e.bounds(ctx)
+    lo, hi = np.array([b[0] for b in bounds]), np.array([b[1] for b in bounds])
+    mu, _ = model.forward(ctx, x_cur)
+    theta_cur = (mu - x_cur[0]) * ctx.step
+    # k = floor(theta_eff / step + c): theta_eff ~ step (k - c + 1/2) up to U(-step/2, step/2)
+    resid = ctx.step * (ctx.counts - x_cur[0] + 0.5) - theta_cur
+    idx = ctx.fit_idx
+    if e.kind == "noise":
+        v2 = ctx.velocity[idx] ** 2
+        excess = resid[idx] ** 2 - (ctx.step**2 + ctx.priv["_truth_var"]) / 12.0
+        s2 = float(np.dot(v2, excess) / max(np.dot(v2, v2), 1e-300))
+        guess = math.sqrt(s2) if s2 > 0 else 0.05 * hi[0]
+        return np.clip([guess], lo, hi)
+    aux = {**ctx.aux, **ctx.priv, "_offset": x_cur[0]}
+    J = e.signature(theta_cur, ctx.t, ctx.velocity, aux, ctx)[idx]
+    A = np.column_stack([np.ones(idx.size), J])
+    coef, *_ = np.linalg.lstsq(A, resid[idx] - resid[idx].mean(), rcond=None)
+    return np.clip(coef[1:], lo + 1e-12 * (hi - lo), hi - 1e-12 * (hi - lo))
+
+
+@dataclass
+class _Fitted:
+    model: _Model
+    x: np.ndarray
+    ll: float
+
+
+def _base_start(ctx):
+    c0 = float(np.median(ctx.counts - ctx.truth / ctx.step)) + 0.5
+    return np.array([c0, -1.0])
+
+
+def _extend(cur: _Fitted, e, ctx):
+    """Fit ``cur`` plus effect ``e``; returns a _Fitted or None when ``e`` finds nothing."""
+    model = _Model(cur.model.effects + [e])
+    x0 = np.empty(model.size)
+    # carry over current parameters by effect identity
+    x0[:2] = cur.x[:2]
+    for eff, sl in zip(model.effects, model.slices):
+        if eff is e:
+            if e.kind != "discrete":
+                x0[sl] = _initial_effect_params(e, cur.model, ctx, cur.x)
+        else:
+            j = cur.model.effects.index(eff)
+            x0[sl] = cur.x[cur.model.slices[j]]
+    if e.kind == "discrete":
+        # a counter effect can pull the old offset far off: re-centre it with the effect in place
+        for _ in range(2):
+            mu, _ = model.forward(ctx, x0)
+            x0[0] += float(np.median(ctx.counts - mu)) + 0.5
+    x, ll = _fit(model, ctx, x0)
+    # a second start at the null guards against a poor linearised guess
+    if getattr(e, "multistart", False):
+        x0b = x0.copy()
+        sl = model.slices[model.effects.index(e)]
+        b = e.bounds(ctx)
+        x0b[sl] = [min(max(v, lo), hi) for v, (lo, hi) in zip(e.null() + 0.02 * np.array([hi - lo for lo, hi in b]), b)]
+        xb, llb = _fit(model, ctx, x0b)
+        if llb > ll:
+            x, ll = xb, llb
+    return _Fitted(model, x, ll)
+
+
+def _discrete_candidate(name, cur: _Fitted, ctx):
+    mu, _ = cur.model.forward(ctx, cur.x)
+    if name == "missed_counts":
+        if any(isinstance(e, fx.MissedCounts) for e in cur.model.effects):
+            return None
+        resid = ctx.counts - (mu - 0.5)
+        times, jumps = fx.MissedCounts.detect(ctx.t, resid)
+        return fx.MissedCounts(times, jumps) if times else None
+    if name == "wrap_around":
+        if any(isinstance(e, fx.WrapAround) for e in cur.model.effects):
+            return None
+        period = fx.WrapAround.detect(ctx.truth, ctx.grid + ctx.step * ctx.counts, ctx.step)
+        return fx.WrapAround(period) if period else None
+    raise ValueError(name)
+
+
+def _lr_pvalue(lr, k, n_boundary):
+    if k == 0:
+        return float("nan")
+    lr = max(lr, 0.0)
+    if n_boundary:
+        # one parameter on its boundary: 50:50 mixture of chi2_{k-1} and chi2_k
+        lower = float(stats.chi2.sf(lr, k - 1)) if k > 1 else float(lr <= 0.0)
+        return 0.5 * lower + 0.5 * float(stats.chi2.sf(lr, k))
+    return float(stats.chi2.sf(lr, k))
+
+
+def _folds(ctx, n_folds):
+    idx = ctx.fit_idx
+    return np.array_split(idx, n_folds)
+
+
+def _heldout_gain(cur: _Fitted, new: _Fitted, ctx, n_folds):
+    gain = 0.0
+    for fold in _folds(ctx, n_folds):
+        train = np.setdiff1d(ctx.fit_idx, fold, assume_unique=True)
+        xc, _ = _fit(cur.model, ctx, cur.x, idx=train, maxiter=100)
+        xn, _ = _fit(new.model, ctx, new.x, idx=train, maxiter=100)
+        gain += _loglik(new.model, ctx, xn, fold) - _loglik(cur.model, ctx, xc, fold)
+    return gain
+
+
+def _intervals(fitted: _Fitted, ctx):
+    """Sandwich standard errors of all free parameters (see module notes)."""
+    model, x = fitted.model, fitted.x
+    scales = model.scales(ctx)
+    _, g = _scores(model, ctx, x, scales, ctx.fit_idx)
+    info = g.T @ g
+    blocks = np.array_split(np.arange(g.shape[0]), _CI_BLOCKS)
+    gb = np.array([g[b].sum(axis=0) for b in blocks])
+    meat = gb.T @ gb
+    inv = np.linalg.pinv(info)
+    sand = inv @ meat @ inv
+    var = np.maximum(np.diag(inv), np.diag(sand))
+    return np.sqrt(var) * scales
+
+
+def _floor_probs(mu, half, sigma, js):
+    """P(count = floor(mu) + j) for a uniform(-half, half) plus N(0, sigma^2) perturbation of mu."""
+    base = np.floor(mu)
+
+    def cdf(x):  # P(mu + U + N < base + x)
+        d = base + x - mu
+        if half <= 0:
+            return ndtr(d / sigma)
+        sg = sigma
+
+        def G(u):
+            return u * ndtr(u) + np.exp(-0.5 * u * u - _LOG_SQRT_2PI)
+
+        return np.clip(sg / (2 * half) * (G((d + half) / sg) - G((d - half) / sg)), 0.0, 1.0)
+
+    probs = [cdf(j + 1) - cdf(j) for j in js]
+    return np.array(probs)
+
+
+def residual_stats(fitted: _Fitted, ctx) -> dict:
+    """Residual statistics against the exact-model floor (see module notes)."""
+    mu, _ = fitted.model.forward(ctx, fitted.x)
+    kpred = np.floor(mu)
+    r = ctx.step * (ctx.counts - kpred)
+    half = 0.5 * ctx.truth_step / ctx.step
+    sigma = np.sqrt(fitted.model.noise_var(ctx, fitted.x)) / ctx.step + 1e-9
+    reach = int(math.ceil(half + 7.0 * float(np.max(sigma)))) + 2
+    js = np.arange(-reach, reach + 1)
+    P = _floor_probs(mu, half, sigma, js)
+    er = ctx.step * (js[:, None] * P).sum(axis=0)
+    er2 = ctx.step**2 * ((js[:, None] ** 2) * P).sum(axis=0)
+    floor_var = float(er2.mean() - er.mean() ** 2)
+    var = float(r.var())
+    d = r**2 - er2
+    bm = np.array([b.mean() for b in np.array_split(d, _FLOOR_BLOCKS)])
+    se = float(bm.std(ddof=1) / math.sqrt(bm.size))
+    lo, hi = max(floor_var - _Z90 * se, 0.0), floor_var + _Z90 * se
+    return {
+        "metric": METRIC,
+        "std": math.sqrt(var),
+        "mean": float(r.mean()),
+        "rms": float(np.sqrt(np.mean(r**2))),
+        "floor_std": math.sqrt(max(floor_var, 0.0)),
+        "floor_ci": (math.sqrt(lo), math.sqrt(hi)),
+        "mismatch_fraction": float(np.mean(r != 0)),
+        "loglik": float(fitted.ll),
+    }
+
+
+@dataclass
+class SelectionResult:
+    """Outcome of :func:`select_effects` (see the module notes for every quantity)."""
+
+    effects: list
+    before: dict
+    after: dict
+    explained: bool
+    message: str
+    steps: list
+    offset_counts: float
+    nuisance_jitter_counts: float
+    _fitted: _Fitted = field(repr=False, default=None)
+    _ctx: _Ctx = field(repr=False, default=None)
+
+    def model_prediction(self, t=None, truth=None, aux=None) -> np.ndarray:
+        """Measured-channel reading (rad) predicted by the exact model with the chosen effects.
+
+        Without arguments, on the log the selection ran on. With new ``t`` and ``truth`` (and
+        ``aux`` when an effect uses it), the same model on another trajectory; a wrap-around
+        effect needs the measured counts and is then left out.
+        """
+        ctx, fitted = self._ctx, self._fitted
+        if t is not None or truth is not None:
+            t = np.asarray(t, float)
+            truth = np.asarray(truth, float)
+            ctx = _make_ctx(t, truth, np.zeros(t.size, np.int64), ctx.step, ctx.truth_step, aux or {},
+                            ctx.grid, ctx.priv.get("_line_pitch"))
+            effects = [e for e in fitted.model.effects if not isinstance(e, fx.WrapAround)]
+            model = _Model(effects)
+            x = np.concatenate([fitted.x[:2]] + [fitted.x[sl] for e, sl in zip(fitted.model.effects, fitted.model.slices)
+                                                 if not isinstance(e, fx.WrapAround)])
+            mu, _ = model.forward(ctx, x)
+        else:
+            mu, _ = fitted.model.forward(ctx, fitted.x)
+        return ctx.grid + ctx.step * np.floor(mu)
+
+    def to_summary(self) -> dict:
+        """The DESIGN section 3 ``residuals`` block (JSON-ready)."""
+
+        def clean(d):
+            return {k: (list(v) if isinstance(v, tuple) else v) for k, v in d.items()}
+
+        return {
+            "metric": METRIC,
+            "before": clean(self.before),
+            "after": clean(self.after),
+            "effects": [e.to_dict() for e in self.effects],
+            "explained": bool(self.explained),
+            "message": self.message,
+        }
+
+
+def estimate_grid_step(x, rtol: float = 1e-6) -> float:
+    """The grid step of a quantized signal (smallest non-zero jump dividing all jumps), or 0.
+
+    Returns 0 when the signal is not on a common grid (a continuous channel).
+    """
+    x = np.asarray(x, float)
+    d = np.abs(np.diff(x))
+    scale = max(float(np.max(np.abs(x))), 1e-300)
+    d = d[d > 1e3 * np.finfo(float).eps * scale]
+    if d.size == 0:
+        return 0.0
+    q = float(np.min(d))
+    ratio = d / q
+    if np.all(np.abs(ratio - np.round(ratio)) <= max(rtol * np.max(ratio), 1e-6)):
+        return q
+    return 0.0
+
+
+def _smoothed_velocity(t, truth, truth_step):
+    """Velocity of the truth (Savitzky-Golay, 21 samples, quadratic) and a dead zone below it.
+
+    The dead zone ``v_eps`` is where the direction is kept from the last motion (the memory of
+    hysteresis and backlash). A truth that moves without flicker (a clean quantized or smooth
+    channel) gets no dead zone: a centred filter of a monotone run never changes sign, and any
+    dead zone would delay the direction at each reversal and bias a hysteresis width. A truth
+    that flickers (more than 5 % of its moves reverse the previous one) gets a dead zone above
+    both a one-count flicker (``0.075 truth_step / dt``, the largest filter output of one
+    count) and three standard deviations of the filtered white noise (from the MAD of the
+    sample-to-sample differences).
+    """
+    dt = float(np.median(np.diff(t)))
+    n = truth.size
+    win = min(21, n - (1 - n % 2)) if n >= 5 else 0
+    if win >= 5:
+        v = signal.savgol_filter(truth, win, 2, deriv=1, delta=dt)
+        half = win // 2
+        sum_i2 = half * (half + 1) * (2 * half + 1) / 3.0
+    else:
+        v = np.gradient(truth, t)
+        sum_i2 = 0.5
+    d = np.diff(truth)
+    moves = np.sign(d[d != 0])
+    flicker = float(np.mean(moves[1:] != moves[:-1])) if moves.size > 1 else 0.0
+    if flicker <= 0.05:
+        return v, 0.0
+    sigma_n = float(np.median(np.abs(d - np.median(d)))) / 0.6745 / math.sqrt(2.0)
+    v_eps = max(0.075 * truth_step / dt, 3.0 * sigma_n / (math.sqrt(sum_i2) * dt))
+    return v, v_eps
+
+
+def _make_ctx(t, truth, counts, step, truth_step, aux, grid, line_pitch, fit_idx=None):
+    v, v_eps = _smoothed_velocity(t, truth, truth_step) if t.size > 1 else (np.zeros(t.size), 0.0)
+    vs = np.where(np.abs(v) > v_eps, v, 0.0)
+    priv = {
+        "_step": step,
+        "_truth_step": truth_step,
+        "_truth_var": truth_step**2 / 12.0,
+        "_counts": counts,
+        "_theta_ref": float(np.mean(truth)) if truth.size else 0.0,
+        "_line_pitch": line_pitch if line_pitch else 4.0 * step,
+        "_motion_sign": fx.motion_sign(vs),
+    }
+    if aux and aux.get("torque") is not None:
+        priv["_torque_ref"] = float(np.mean(aux["torque"]))
+    if fit_idx is None:
+        fit_idx = np.arange(t.size)
+    return _Ctx(t, truth, v, step, truth_step, counts, grid, aux, priv, fit_idx)
+
+
+def _subsample(ctx: _Ctx, every: int) -> _Ctx:
+    """Every ``every``-th sample of a context, with velocity and direction from the full log."""
+    sl = slice(None, None, every)
+    priv = {k: (v[sl] if isinstance(v, np.ndarray) and v.shape == ctx.t.shape else v) for k, v in ctx.priv.items()}
+    aux = {k: v[sl] for k, v in ctx.aux.items()}
+    t = ctx.t[sl]
+    return _Ctx(t, ctx.truth[sl], ctx.velocity[sl], ctx.step, ctx.truth_step, ctx.counts[sl], ctx.grid, aux, priv,
+                np.arange(t.size))
+
+
+def _check_inputs(t, truth, measured, step, truth_step, aux):
+    t = np.asarray(t, dtype=float)
+    truth = np.asarray(truth, dtype=float)
+    measured = np.asarray(measured, dtype=float)
+    if t.ndim != 1 or truth.shape != t.shape or measured.shape != t.shape:
+        raise ValueError(f"t, truth and measured must be 1-D of one length, got shapes {t.shape}, {truth.shape}, {measured.shape}")
+    if t.size < 50:
+        raise ValueError(f"need at least 50 samples, got {t.size}")
+    for name, arr in (("t", t), ("truth", truth), ("measured", measured)):
+        bad = np.flatnonzero(~np.isfinite(arr))
+        if bad.size:
+            raise ValueError(f"{name} must be finite; first non-finite value at row {int(bad[0])}")
+    bad = np.flatnonzero(np.diff(t) <= 0)
+    if bad.size:
+        raise ValueError(f"t must be strictly increasing; row {int(bad[0]) + 1} is not after row {int(bad[0])}")
+    if not (isinstance(step, (int, float)) and math.isfinite(step) and step > 0):
+        raise ValueError(f"step must be a finite positive number, got step={step!r}")
+    if truth_step is not None and not (math.isfinite(truth_step) and truth_step >= 0):
+        raise ValueError(f"truth_step must be None or a finite number >= 0, got truth_step={truth_step!r}")
+    aux = dict(aux or {})
+    for k, v in aux.items():
+        v = np.asarray(v, dtype=float)
+        if v.shape != t.shape:
+            raise ValueError(f"aux[{k!r}] must have the shape of t {t.shape}, got {v.shape}")
+        bad = np.flatnonzero(~np.isfinite(v))
+        if bad.size:
+            raise ValueError(f"aux[{k!r}] must be finite; first non-finite value at row {int(bad[0])}")
+        aux[k] = v
+    return t, truth, measured, float(step), aux
+
+
+def _grid_and_counts(measured, step):
+    frac = measured / step
+    ang = 2.0 * np.pi * frac
+    phase = math.atan2(float(np.mean(np.sin(ang))), float(np.mean(np.cos(ang)))) / (2.0 * np.pi)
+    grid = phase * step
+    counts_f = (measured - grid) / step
+    counts = np.round(counts_f)
+    off = np.abs(counts_f - counts)
+    bad = np.flatnonzero(off > 0.05)
+    if bad.size > 0.01 * measured.size:
+        raise ValueError(
+            f"measured is not on a grid of step {step!r}: row {int(bad[0])} is {off[bad[0]]:.3f} steps off "
+            f"({bad.size} of {measured.size} rows more than 0.05 step off)"
+        )
+    return grid, counts.astype(np.int64)
+
+
+def _candidates(ctx, names):
+    out = []
+    for cls in fx.EFFECTS:
+        name = cls.name
+        if names is not None and name not in names:
+            continue
+        if cls.kind == "discrete":
+            out.append(name)
+            continue
+        e = cls()
+        if e.applicable(ctx):
+            out.append(e)
+    return out
+
+
+def select_effects(
+    t,
+    truth,
+    measured,
+    step: float,
+    *,
+    truth_step: float | None = None,
+    aux: dict | None = None,
+    seed: int = 0,
+    candidates=None,
+    alpha: float = 0.01,
+    bic_threshold: float = 10.0,
+    n_folds: int = 5,
+    max_effects: int = 4,
+    max_tries: int = 3,
+    line_pitch: float | None = None,
+    stop_at_floor: bool = True,
+) -> SelectionResult:
+    """Find, fit and report the effects that explain ``measured`` against ``truth``.
+
+    Parameters
+    ----------
+    t : array_like
+        Sample times (s), strictly increasing.
+    truth, measured : array_like
+        Truth (reference) and measured angles (rad), same length as ``t``.
+    step : float
+        Quantization step of the measured channel (rad).
+    truth_step : float or None
+        Quantization step of the truth channel; None estimates it from the truth's grid
+        (:func:`estimate_grid_step`, 0 for a continuous truth).
+    aux : dict, optional
+        Extra channels, e.g. ``{"torque": array}`` (enables the compliance effect).
+    seed : int
+        Accepted for the agreed interface; the procedure is deterministic (no random draws).
+    candidates : iterable of str, optional
+        Effect names to consider (default: all applicable, see ``effects.EFFECTS``).
+    alpha : float
+        Level of the likelihood-ratio test each added effect must pass.
+    bic_threshold : float
+        Minimum ``delta_bic`` (BIC of the current model minus BIC with the effect).
+    n_folds : int
+        Contiguous held-out blocks for the confirmation.
+    max_effects, max_tries : int
+        At most this many effects; at most this many candidates confirmed per step.
+    line_pitch : float, optional
+        Line pitch (rad) of the line-pitch harmonics; default four measured steps.
+    stop_at_floor : bool
+        Stop as soon as the residual std is within the floor's interval (the stop rule of
+        DESIGN 2.3). The likelihood can still see an effect whose std change is inside that
+        interval; False tries the candidates anyway (the selection then ends only when none
+        passes).
+
+    Returns
+    -------
+    SelectionResult
+
+    Raises
+    ------
+    ValueError
+        On inputs of the wrong shape, non-finite values (naming the row), non-increasing
+        time, or a measured channel not on a grid of ``step``.
+    """
+    t, truth, measured, step, aux = _check_inputs(t, truth, measured, step, truth_step, aux)
+    if candidates is not None:
+        candidates = set(candidates)
+        known = {c.name for c in fx.EFFECTS}
+        unknown = candidates - known
+        if unknown:
+            raise ValueError(f"unknown candidate effects {sorted(unknown)}; known: {sorted(known)}")
+    if truth_step is None:
+        truth_step = estimate_grid_step(truth)
+    grid, counts = _grid_and_counts(measured, step)
+    full = _make_ctx(t, truth, counts, step, float(truth_step), aux, grid, line_pitch)
+    # Long logs are fitted on every k-th sample (at most _MAX_FIT_SAMPLES): the fits, the
+    # criterion and the intervals use the subsample, the before/after statistics the full log.
+    every = max(1, math.ceil(t.size / _MAX_FIT_SAMPLES))
+    ctx = full if every == 1 else _subsample(full, every)
+    n_fit = ctx.fit_idx.size
+
+    base_model = _Model([])
+    x, ll = _fit(base_model, ctx, _base_start(ctx))
+    # the offset c is only known modulo whole counts from a poor start: refine from the fit
+    cur = _Fitted(base_model, x, ll)
+    before = residual_stats(cur, full)
+    chosen = []  # (effect, delta_bic, heldout, p)
+    steps = []
+    remaining = _candidates(ctx, candidates)
+    for _ in range(max_effects):
+        st = residual_stats(cur, ctx)
+        if stop_at_floor and st["std"] <= st["floor_ci"][1]:
+            break
+        trials = []
+        for cand in remaining:
+            if isinstance(cand, str):
+                e = _discrete_candidate(cand, cur, ctx)
+                if e is None:
+                    continue
+            else:
+                e = cand
+            new = _extend(cur, e, ctx)
+            k = new.model.n_params() - cur.model.n_params()
+            dll = new.ll - cur.ll
+            dbic = 2.0 * dll - k * math.log(n_fit)
+            p = float("nan") if e.kind == "discrete" else _lr_pvalue(2.0 * dll, k, len(e.boundary))
+            record = {"step": len(chosen) + 1, "effect": e.name, "delta_bic": dbic, "p_value": p}
+            steps.append(record)
+            trials.append((dbic, p, cand, e, new, record))
+        trials.sort(key=lambda r: -r[0])
+        picked = None
+        for dbic, p, cand, e, new, record in trials[:max_tries]:
+            if dbic <= bic_threshold or (np.isfinite(p) and p >= alpha):
+                break
+            gain = _heldout_gain(cur, new, ctx, n_folds)
+            record["delta_heldout"] = gain
+            if gain > 0:
+                picked = (dbic, p, cand, e, new, gain)
+                break
+        if picked is None:
+            break
+        dbic, p, cand, e, new, gain = picked
+        chosen.append((e, dbic, gain, p))
+        remaining = [c for c in remaining if c is not cand]
+        cur = new
+
+    after = residual_stats(cur, full)
+    se = _intervals(cur, ctx)
+    lows = [b[0] for b in cur.model.bounds(ctx)]
+    highs = [b[1] for b in cur.model.bounds(ctx)]
+    fitted_effects = []
+    for e, dbic, gain, p in chosen:
+        i = cur.model.effects.index(e)
+        params = cur.model.params_of(cur.x, i)
+        ci = {}
+        sl = cur.model.slices[i]
+        if e.kind == "discrete":
+            ci = {k: (v, v) for k, v in params.items()}
+        else:
+            for name, j in zip(e.param_names, range(sl.start, sl.stop)):
+                ci[name] = (max(cur.x[j] - _Z90 * se[j], lows[j]), min(cur.x[j] + _Z90 * se[j], highs[j]))
+        fitted_effects.append(FittedEffect(e.name, params, ci, dbic, gain, p, e.derived(params)))
+    explained = after["std"] <= after["floor_ci"][1]
+    message = _message(fitted_effects, explained, before)
+    return SelectionResult(fitted_effects, before, after, bool(explained), message, steps,
+                           float(cur.x[0]), float(10.0 ** cur.x[1]), cur, full)
+
+
+def _fmt(e: FittedEffect) -> str:
+    main = ", ".join(f"{k} {v:.3g}" for k, v in e.params.items())
+    return f"{e.name} ({main})"
+
+
+def _message(effects, explained, before):
+    if not effects:
+        if before["std"] <= before["floor_ci"][1]:
+            return "the residual matches the exact-model quantization floor; no effect is needed"
+        return "a significant residual remains that no candidate explains"
+    names = " + ".join(_fmt(e) for e in effects)
+    if explained:
+        return f"{names} explains the residual down to the exact-model quantization floor"
+    return f"{names} reduces the residual, but a significant residual remains that no candidate explains"

@@ -1,0 +1,44 @@
+# Residual stage per measured channel (every measured channel with a truth channel on the same
+# joint): residual against the exact quantizer model, diagnostics, effect selection, before/after.
+
+
+rule residuals:
+    input:
+        canonical="results/{log_id}/canonical.parquet",
+    output:
+        block="results/{log_id}/residuals/{channel}/residuals.json",
+        table=report("results/{log_id}/residuals/{channel}/before_after.csv", category="Residuals",
+                     subcategory="{log_id}", caption="../report/residual_table.rst"),
+        diagnostics=report("results/{log_id}/residuals/{channel}/diagnostics.png",
+                           category="Residuals", subcategory="{log_id}",
+                           caption="../report/residual_diagnostics.rst"),
+        before_after=report("results/{log_id}/residuals/{channel}/before_after.png",
+                            category="Residuals", subcategory="{log_id}",
+                            caption="../report/residual_before_after.rst"),
+    params:
+        pair=lambda wc: residual_pair(wc),
+        settings=lambda wc: residual_settings(wc),
+        code=CODE_DIGEST,
+    threads: 1
+    log:
+        "results/{log_id}/logs/residuals_{channel}.log",
+    benchmark:
+        "results/{log_id}/benchmarks/residuals_{channel}.tsv"
+    script:
+        "../../scripts/residuals.py"
+
+
+rule batch_residuals:
+    input:
+        summaries=expand("results/{log_id}/summary.json", log_id=RESIDUAL_IDS),
+    output:
+        table=report("results/batch/residuals.csv", category="Residuals",
+                     caption="../report/residual_batch.rst"),
+    params:
+        code=CODE_DIGEST,
+    log:
+        "results/batch/logs/batch_residuals.log",
+    benchmark:
+        "results/batch/benchmarks/batch_residuals.tsv"
+    script:
+        "../../scripts/batch_residuals.py"
