@@ -19,16 +19,16 @@ Times are ratios to the ``read_table`` median of the *same file* measured in thi
 memory is each child's own ``getrusage(RUSAGE_SELF).ru_maxrss`` (so one case's peak cannot
 leak into another's). The table is printed and written to ``results/benchmarks/performance.csv``.
 
-Other benchmarks append their own rows to the same CSV: every row has a ``section``; a run
-replaces only the rows of the sections it measured (``--only stream`` keeps ``stages`` and
-any other section, e.g. ``batch`` or ``mcmc`` from another script, which can call
-:func:`write_section` with rows of :data:`COLUMNS`).
+Other benchmarks append their own rows to the same CSV: every row has a ``section`` and a
+``case``; a run replaces only the rows of the (section, case) pairs it measured, so
+``--only stream`` keeps ``stages``, and any other section (e.g. ``batch`` or ``mcmc`` from
+another script, which can call :func:`write_section` with rows of :data:`COLUMNS`) stays.
 
 Usage::
 
     nice python workflow/benchmarks/bench_performance.py                 # 1 h log, full bank
     nice python workflow/benchmarks/bench_performance.py --duration-s 60 --only stream
-    nice python workflow/benchmarks/bench_performance.py --bank export   # the 2 exported filters
+    nice python workflow/benchmarks/bench_performance.py --long-bank export   # long run: 2 filters
 """
 from __future__ import annotations
 
@@ -54,12 +54,14 @@ TARGET_RSS_MB = 1536.0
 TARGET_RATIO = 4.0
 
 
-def write_section(rows: list[dict], sections: set[str], path: pathlib.Path) -> pd.DataFrame:
-    """Replace the rows of ``sections`` in the CSV at ``path`` by ``rows``; keep the others."""
+def write_section(rows: list[dict], path: pathlib.Path) -> pd.DataFrame:
+    """Add ``rows`` to the CSV at ``path``, replacing the rows of the same (section, case);
+    rows of other sections (other scripts) and other cases are kept."""
     new = pd.DataFrame(rows, columns=COLUMNS)
     if path.exists():
         old = pd.read_csv(path)
-        old = old[~old["section"].isin(sections)]
+        replaced = set(zip(new["section"], new["case"]))
+        old = old[[pair not in replaced for pair in zip(old["section"], old["case"])]]
         new = pd.concat([old, new], ignore_index=True) if len(old) else new
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".csv.tmp")
@@ -220,7 +222,7 @@ def run_stages(small: pathlib.Path, args) -> list[dict]:
 def run_stream(long: pathlib.Path, args) -> list[dict]:
     read, _ = _child(["--worker", "read", str(long), "--reps", str(args.reps)])
     n, read_s = read["n_samples"], read["median_s"]
-    case = f"long {args.duration_s:g} s log at {args.fs_hz:g} Hz"
+    case = f"long {args.duration_s:g} s log at {args.fs_hz:g} Hz, bank={args.long_bank}"
     rows = [_row("stream", case, "read_table", n, read_s, read_s, args.reps,
                  rss=read["peak_rss_mb"], notes="whole file into memory (the baseline)")]
     piece, _ = _child(["--worker", "read", str(long), "--reps", "1", "--streamed",
@@ -232,7 +234,7 @@ def run_stream(long: pathlib.Path, args) -> list[dict]:
         timings = pathlib.Path(tmp) / "timings.json"
         cmd = [sys.executable, "-m", "enclab.stream", "moments", str(long),
                str(pathlib.Path(tmp) / "moments.json"), "--configfile",
-               str(ROOT / "config.yaml"), "--bank", args.bank, "--chunk-rows",
+               str(ROOT / "config.yaml"), "--bank", args.long_bank, "--chunk-rows",
                str(args.chunk_rows), "--timings", str(timings)]
         t0 = time.perf_counter()
         subprocess.run(cmd, check=True)
@@ -247,7 +249,7 @@ def run_stream(long: pathlib.Path, args) -> list[dict]:
                      target=f"ratio <= {TARGET_RATIO:g}; peak <= {TARGET_RSS_MB:g} MB",
                      met=f"time {'yes' if wall <= TARGET_RATIO * read_s else 'no'}; "
                          f"memory {'yes' if rss <= TARGET_RSS_MB else 'no'}",
-                     notes=f"python -m enclab.stream moments, bank={args.bank} "
+                     notes=f"python -m enclab.stream moments, bank={args.long_bank} "
                            f"({t['n_filters']} filters, {t['n_levels']} levels, "
                            f"{t['n_rows']} rows), chunk {args.chunk_rows}; wall time incl. "
                            f"interpreter start"))
@@ -262,6 +264,8 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=20261128)
     p.add_argument("--reps", type=int, default=3)
     p.add_argument("--bank", choices=("config", "export"), default="config")
+    p.add_argument("--long-bank", choices=("config", "export"),
+                   help="filters of the long streamed run (default: --bank)")
     p.add_argument("--chunk-rows", type=int, default=16_384)
     p.add_argument("--only", choices=("stages", "stream"), help="run one section only")
     p.add_argument("--out", type=pathlib.Path, default=OUT_DIR / "performance.csv")
@@ -280,6 +284,7 @@ def main(argv=None) -> int:
         pathlib.Path(args.worker_out).write_text(json.dumps(out))
         return 0
 
+    args.long_bank = args.long_bank or args.bank
     if args.reps < 1:
         p.error("--reps must be >= 1")
     OUT_DIR.mkdir(parents=True, exist_ok=True)
@@ -303,7 +308,7 @@ def main(argv=None) -> int:
              f"{load_start[0]:.1f} at start, {load_end[0]:.1f} at end")
     for row in rows:
         row["notes"] = f"{row['notes']}; {stamp}" if row["notes"] else stamp
-    table = write_section(rows, sections, args.out)
+    table = write_section(rows, args.out)
     with pd.option_context("display.max_columns", None, "display.width", 250,
                            "display.max_colwidth", 60):
         print(table.drop(columns=["notes"]).to_string(index=False))

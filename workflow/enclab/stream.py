@@ -233,7 +233,6 @@ def empirical_rows(pieces: Iterable[pd.DataFrame], meta: Mapping, levels: Sequen
     device = analysis.device_of(meta)
     units = analysis._signal_units(meta, device)
     joint_names = [c["name"] for c in analysis.truth_channels(meta)]
-    n_j = len(joint_names)
     outputs = [] if device is None else list(device.output_names)
     coeffs = {f.label(): flt.transfer_function(f, fs) for f in bank}
     skips = {f.label(): flt.settle_samples(f, fs, settle_tol) for f in bank}
