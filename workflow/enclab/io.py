@@ -647,7 +647,7 @@ def iter_canonical(path: str | os.PathLike, batch_rows: int = 262_144,
         A canonical log (:func:`write_canonical` or :func:`write_canonical_chunks`).
     batch_rows : int
         Rows per yielded piece (at most; a row group's last piece may be shorter). Memory
-        is bounded by about one row group plus one piece.
+        is bounded by about one decoded row group plus one piece.
     columns : list of str, optional
         Columns to read (default all).
 
@@ -671,9 +671,15 @@ def iter_canonical(path: str | os.PathLike, batch_rows: int = 262_144,
     meta = _canonical_meta(path, handle.schema_arrow)
 
     def pieces():
+        # Row group by row group, not ParquetFile.iter_batches: with pyarrow 26 the latter
+        # keeps ~1 compressed row group per row group read in Arrow's pool (measured: +20 MB
+        # per 1e6-row group of an 8-column log, ~0.8 GB after a one-hour 10 kHz log).
         with handle:
-            for batch in handle.iter_batches(batch_size=batch_rows, columns=columns):
-                yield batch.to_pandas()
+            for i in range(handle.num_row_groups):
+                table = handle.read_row_group(i, columns=columns)
+                for batch in table.to_batches(max_chunksize=batch_rows):
+                    yield batch.to_pandas()
+                del table
 
     return meta, int(handle.metadata.num_rows), pieces()
 
