@@ -475,8 +475,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     m.add_argument("out", help="moments JSON to write (same format as the moments rule)")
     m.add_argument("--configfile", default="config.yaml")
     m.add_argument("--chunk-rows", type=int, default=16_384,
-                   help="rows per piece (default 16384: the Franka kinematics run ~4x faster "
-                        "on pieces that fit in cache than on 131072-row pieces)")
+                   help="rows per piece (default 16384: pieces whose kinematics "
+                        "intermediates fit in cache; much larger pieces are slower)")
     m.add_argument("--bank", choices=("config", "export"), default="config",
                    help="filters: the whole derivatives.bank (default, as the moments rule) "
                         "or only derivatives.export")
