@@ -13,6 +13,7 @@ Modules (one concern each):
 - :mod:`enclab.io`         the only module that touches disk
 - :mod:`enclab.simulate`   simulated lab logs (Phantom Premium protocol)
 - :mod:`enclab.analysis`   per-log stage functions used by the workflow scripts
+- :mod:`enclab.stream`     the moments of logs too long for memory, piece by piece (CLI)
 - :mod:`enclab.plots`      figures (return matplotlib Figures; scripts save them)
 - :mod:`enclab.lrde`       extreme low-resolution encoder (Zhang & Gao): model, dwell, emcee fit
 """
