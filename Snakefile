@@ -10,6 +10,7 @@ include: "workflow/rules/ingest.smk"
 include: "workflow/rules/quantization.smk"
 include: "workflow/rules/batch.smk"
 include: "workflow/rules/lrde.smk"
+include: "workflow/rules/chunks.smk"
 
 
 rule all:
