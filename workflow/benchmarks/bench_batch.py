@@ -7,8 +7,8 @@ temporary workspace, then measures, in one run of this script:
 - ``in-process``: the paper-000 stages of every log called one after the other in one Python
   (``enclab.stages.quantization_log`` through ``enclab.runner.run_chunk``, the same calls and
   files as the workflow): the compute the workflow cannot avoid;
-- each requested workflow mode, ``snakemake --cores C`` to every log's ``summary.json`` (no
-  figures, no MCMC): ``per-rule`` (``chunk_size=0``, one job per stage and log) and
+- each requested workflow mode, ``snakemake --cores C`` to every log's ``summary.json`` and
+  ``derivatives.parquet`` (no figures, no MCMC): ``per-rule`` (``chunk_size=0``, one job per stage and log) and
   ``batched`` (``chunk_size=K``, one job per K logs plus a publishing shell job per log).
 
 Columns of ``results/benchmarks/batch_overhead.csv`` (times in s):
@@ -175,7 +175,10 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
                  "cpu_s": cpu, "identical": True})
     load.append(os.getloadavg()[0])
 
-    targets = [f"results/{i}/summary.json" for i in ids]
+    # The chunked mode also writes every log's derivatives.parquet (the per-stage mode only
+    # for the logs with figures): ask both modes for it, so that they do the same work.
+    targets = [f"results/{i}/{name}" for i in ids for name in ("summary.json",
+                                                                "derivatives.parquet")]
     for mode in modes:
         size = chunk if mode == "batched" else 0
         command = [str(SNAKEMAKE), "--snakefile", str(ROOT / "Snakefile"), "--directory",
