@@ -11,6 +11,7 @@ include: "workflow/rules/quantization.smk"
 include: "workflow/rules/batch.smk"
 include: "workflow/rules/lrde.smk"
 include: "workflow/rules/residuals.smk"
+include: "workflow/rules/chunks.smk"
 
 
 rule all:

@@ -1,12 +1,10 @@
 """Rule kinematics: operational positions of truth and levels, Jacobian at the truth."""
-from enclab import analysis, io
+from enclab import stages
 from enclab.runner import run
 
 
 def main(smk):
-    req, meta = io.read_canonical(smk.input.requantized)
-    io.write_canonical(analysis.kinematics_table(req, meta, meta["levels"]), meta,
-                       smk.output.kinematics)
+    stages.kinematics(smk.input.requantized, smk.output.kinematics)
 
 
 run(snakemake, main)  # noqa: F821

@@ -49,6 +49,20 @@ def _stages(entry):
 
 
 LOG_IDS = sorted(ENTRIES)
+
+
+# Chunked mode (config chunk_size > 0; rules in chunks.smk): logs that run only the paper-000
+# stages, in sorted order, K per chunk. Chunks are cut from every log of the manifest, before
+# batch_scope leaves failed logs out, so that the second pass of `make run` finds the same
+# chunks (complete, nothing to rerun).
+CHUNK_SIZE = int(config.get("chunk_size") or 0)
+# A log with a truth/measured pair also runs the residual stage, whose block its summary.json
+# must carry: it stays in per-rule mode.
+CHUNKED_IDS = sorted(i for i in ENTRIES if _stages(ENTRIES[i]) == ["quantization"]
+                     and not enclab_residual_pairs(ENTRIES[i])) if CHUNK_SIZE else []
+CHUNKS = {f"chunk{k // CHUNK_SIZE:04d}": CHUNKED_IDS[k:k + CHUNK_SIZE]
+          for k in range(0, len(CHUNKED_IDS), max(CHUNK_SIZE, 1))}
+CHUNK_OF = {i: name for name, ids in CHUNKS.items() for i in ids}
 if config.get("batch_scope", "all") == "completed":
     # Second pass after failures: keep the logs that produced a summary, name the others.
     _failed = [i for i in LOG_IDS if not os.path.exists(f"results/{i}/summary.json")]
@@ -81,9 +95,14 @@ FIGURE_IDS = _first_of_groups(QUANT_IDS)
 CODE_DIGEST = enclab.code_digest()
 
 
+def ids_regex(ids):
+    return "|".join(re.escape(i) for i in ids) or "NO_LOGS"
+
+
 wildcard_constraints:
-    log_id="|".join(re.escape(i) for i in LOG_IDS) or "NO_LOGS",
+    log_id=ids_regex(LOG_IDS),
     channel="[A-Za-z_][A-Za-z0-9_]*",
+    chunk=r"chunk\d+",
 
 
 def raw_inputs(wildcards):
@@ -91,6 +110,12 @@ def raw_inputs(wildcards):
     # clear message (a missing input would stop Snakemake from building the whole DAG).
     files = enclab_io.entry_files(ENTRIES[wildcards.log_id], DATA_ROOT)
     return [f for f in files if os.path.exists(f)]
+
+
+def chunk_raw_inputs(wildcards):
+    """The existing data files of every log in a chunk (see raw_inputs)."""
+    return [f for i in CHUNKS[wildcards.chunk]
+            for f in enclab_io.entry_files(ENTRIES[i], DATA_ROOT) if os.path.exists(f)]
 
 
 def entry_of(wildcards):

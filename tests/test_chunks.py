@@ -1,0 +1,177 @@
+"""Chunked mode (config chunk_size > 0): several logs per job, same contract as one job per stage.
+
+The unit tests drive :func:`enclab.runner.run_chunk` directly. The end-to-end test puts two
+good logs, a log with a NaN (fails at ingest) and a log too short for the filters (fails after
+ingest, in the moments/theory stages) in one chunk, next to a paper-002 log that keeps its own
+rules, and runs the two passes of ``make run``: the bad logs fail alone with their one error
+line and leave no output, and every other output is byte-identical to a run with one job per
+stage and log.
+"""
+import hashlib
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from enclab import io, runner, stages
+from enclab.errors import EnclabInputError
+from enclab.lrde import simulate as lrde_sim
+from enclab.simulate import phantom_protocol_run
+from workspace import SNAKEMAKE, lrde_entry, phantom_entry, snakemake_command, write_workspace
+
+
+def _process(entry, folder):
+    # Writes a first output, then fails as the entry asks: a failure after some outputs exist.
+    io.write_json({"id": entry["id"]}, folder / "first.json")
+    if entry.get("fail") == "input":
+        raise EnclabInputError("logs/x.csv", "empty or NaN value", column="angle", row=12,
+                               row_label="line", expected="a finite number")
+    if entry.get("fail") == "bug":
+        raise KeyError("no such key")
+    io.write_json({"id": entry["id"]}, folder / "second.json")
+
+
+def test_run_chunk_isolates_each_failure_and_leaves_no_partial_output(tmp_path):
+    entries = [{"id": "a"}, {"id": "bad", "fail": "input"}, {"id": "bug", "fail": "bug"},
+               {"id": "c"}]
+    status = runner.run_chunk(entries, _process, tmp_path / "chunk")
+    assert status["a"] is None and status["c"] is None
+    assert status["bad"] == "logs/x.csv: column 'angle', line 12: empty or NaN value; expected a finite number."
+    assert "KeyError: 'no such key'" in status["bug"]
+    chunk = tmp_path / "chunk"
+    for ok in ("a", "c"):
+        assert sorted(p.name for p in (chunk / ok).iterdir()) == ["first.json", "second.json"]
+        assert not (chunk / f"{ok}.failed").exists()
+        assert "done in" in (chunk / f"{ok}.log").read_text()
+    for failed in ("bad", "bug"):
+        assert not (chunk / failed).exists(), "a failed log must leave no output"
+        assert (chunk / f"{failed}.failed").read_text().strip() == status[failed]
+        assert "ERROR" in (chunk / f"{failed}.log").read_text()
+    # The one-line message is the log's line in its own log file, and nothing else is left.
+    assert f"ERROR [bad] {status['bad']}" in (chunk / "bad.log").read_text()
+    assert "\n" not in status["bad"]
+    assert sorted(p.name for p in chunk.iterdir()) == [
+        "a", "a.log", "bad.failed", "bad.log", "bug.failed", "bug.log", "c", "c.log"]
+
+
+def test_runner_one_line_errors():
+    err = EnclabInputError("f.csv", "no data lines", expected="two samples")
+    assert runner.error_line(err) == str(err)
+    assert runner.error_line(ValueError("a\n   b")) == "a b"
+    assert runner.error_line(RuntimeError("bug")) is None
+
+
+def test_quantization_outputs_match_the_rules():
+    # publish_log (workflow/rules/chunks.smk) declares these files: keep the two lists equal.
+    text = (Path(__file__).resolve().parents[1] / "workflow/rules/chunks.smk").read_text()
+    for name, file in stages.QUANTIZATION_OUTPUTS.items():
+        assert f'{name}="results/{{log_id}}/{file}"' in text
+
+
+# ----------------------------------------------------------------------------- end to end
+
+COMPARED = {".json", ".csv", ".parquet", ".md"}
+
+
+def _workspace(work):
+    data = work / "logs"
+    data.mkdir(parents=True)
+    entries = []
+    for k in (1, 2):
+        log, _ = phantom_protocol_run(np.zeros(3), np.random.default_rng(k), duration_s=3.0)
+        io.write_table(log, data / f"good{k}.parquet")
+        entries.append(phantom_entry(f"good{k}", f"good{k}.parquet", "g"))
+    bad = log.astype({"theta2_counts": float})
+    bad.loc[1234, "theta2_counts"] = np.nan
+    bad.to_csv(data / "bad.csv", index=False)
+    entries.append(phantom_entry("bad", "bad.csv", "g") | {"format": "csv"})
+    short, _ = phantom_protocol_run(np.zeros(3), np.random.default_rng(4), duration_s=0.04)
+    io.write_table(short, data / "short.parquet")
+    entries.append(phantom_entry("short", "short.parquet", "g"))
+    step = lrde_sim.ROS_DRILL_STEP
+    lrde_log, _ = lrde_sim.open_loop_log(np.random.default_rng(5), n_cycles=6,
+                                         noise_std=0.01 * step, truth_step=step / 100)
+    io.write_table(lrde_log, data / "lrde.parquet")
+    entries.append(lrde_entry("lrde", "lrde.parquet"))
+    write_workspace(work, entries, fig7_group="g")
+    return work
+
+
+def _run(work, *extra):
+    return subprocess.run(snakemake_command(work, "--keep-going", *extra), cwd=work,
+                          capture_output=True, text=True, timeout=900,
+                          env=dict(os.environ, MPLBACKEND="Agg"))
+
+
+def _digests(results):
+    return {str(p.relative_to(results)): (hashlib.sha256(p.read_bytes()).hexdigest()
+                                          if p.suffix in COMPARED else "exists")
+            for p in sorted(results.rglob("*"))
+            if p.is_file() and "logs" not in p.parts and ".chunks" not in p.parts
+            and p.name != "report.html"}
+
+
+@pytest.fixture(scope="module")
+def two_modes(tmp_path_factory):
+    if not SNAKEMAKE.exists():
+        pytest.fail(f"snakemake is not installed next to {sys.executable}")
+    runs = {}
+    for mode, size in (("chunked", 10), ("per_rule", 0)):
+        work = _workspace(tmp_path_factory.mktemp(mode))
+        raw_before = {p.name: p.read_bytes() for p in (work / "logs").iterdir()}
+        config = ("--config", f"chunk_size={size}")
+        first = _run(work, *config)
+        second = _run(work, *config, "batch_scope=completed")
+        if size == 0:
+            # The chunked mode writes derivatives.parquet for every log, the per-stage mode
+            # only for logs with figures: build good2's here too, to compare it.
+            assert _run(work, *config, "--", "results/good2/derivatives.parquet").returncode == 0
+        runs[mode] = (work, first, second, raw_before)
+    return runs
+
+
+@pytest.mark.slow
+def test_bad_logs_fail_alone_with_their_line_and_no_output(two_modes):
+    work, first, second, raw_before = two_modes["chunked"]
+    assert first.returncode != 0, "the bad logs must make the first pass fail"
+    assert second.returncode == 0, second.stderr[-3000:]
+    assert "leaving out 2 log(s) without a summary" in second.stderr
+    assert "process_chunk" in first.stderr and "publish_log" in first.stderr
+    message = (work / "results/bad/logs/quantization.log").read_text()
+    assert "bad.csv" in message and "theta2_counts" in message and "line 1236" in message
+    # Snakemake shows the line too (the failed job's stderr and log).
+    assert "line 1236" in first.stderr
+    assert "samples" in (work / "results/short/logs/quantization.log").read_text()
+    for failed in ("bad", "short"):
+        outputs = [p.name for p in (work / "results" / failed).iterdir() if p.name != "logs"]
+        assert outputs == [], f"{failed} left {outputs}"
+    assert {p.name: p.read_bytes() for p in (work / "logs").iterdir()} == raw_before
+
+
+@pytest.mark.slow
+def test_chunked_outputs_are_byte_identical_to_one_job_per_stage(two_modes):
+    chunked = _digests(two_modes["chunked"][0] / "results")
+    per_rule = _digests(two_modes["per_rule"][0] / "results")
+    # The per-stage mode keeps the outputs of the stages of 'short' that succeeded (ingest
+    # ...); the chunked mode publishes a log whole or not at all. The rest is file for file.
+    extra = set(per_rule) - set(chunked)
+    assert extra and all(name.startswith("short/") for name in extra), extra
+    assert set(chunked) <= set(per_rule)
+    differ = sorted(k for k in chunked if chunked[k] != per_rule[k])
+    assert not differ, f"outputs differ between the modes: {differ}"
+    for name in ("good1/summary.json", "good2/summary.json", "lrde/summary.json",
+                 "batch/quantization.csv", "batch/lrde.csv", "good1/figures/errors.png"):
+        assert name in chunked
+
+
+@pytest.mark.slow
+def test_chunked_rerun_has_nothing_to_do(two_modes):
+    work = two_modes["chunked"][0]
+    before = _digests(work / "results")
+    again = _run(work, "--config", "chunk_size=10", "batch_scope=completed")
+    assert again.returncode == 0, again.stderr[-3000:]
+    assert "Nothing to be done" in again.stderr + again.stdout
+    assert _digests(work / "results") == before

@@ -1,0 +1,155 @@
+"""The per-log quantization stages as file-to-file steps, shared by both execution modes.
+
+Each function reads its inputs with :mod:`enclab.io`, calls :mod:`enclab.analysis` and writes
+its output with :mod:`enclab.io` (atomically). The rule scripts (``scripts/<rule>.py``, one
+Snakemake job per stage and log) and the chunked mode (:func:`quantization_log`, every stage
+of several logs in one job, see ``workflow/rules/chunks.smk``) call the same functions in the
+same order on the same files, so both modes write byte-identical outputs.
+"""
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from pathlib import Path
+
+from enclab import analysis, io
+from enclab.residuals.pipeline import summary_block as residual_summary_block
+
+__all__ = [
+    "QUANTIZATION_OUTPUTS",
+    "ingest",
+    "requantize",
+    "kinematics",
+    "derivatives",
+    "moments",
+    "theory",
+    "summary",
+    "quantization_log",
+]
+
+# Output name -> file name under results/<log_id>/ of the paper-000 stages, in stage order.
+QUANTIZATION_OUTPUTS = {
+    "canonical": "canonical.parquet",
+    "requantized": "requantized.parquet",
+    "kinematics": "kinematics.parquet",
+    "derivatives": "derivatives.parquet",
+    "moments": "moments.json",
+    "theory": "theory.json",
+    "summary": "summary.json",
+}
+
+PathLike = str | os.PathLike
+
+
+def ingest(entry: Mapping, data_root: PathLike, devices: Mapping, canonical: PathLike) -> None:
+    """One manifest entry -> the canonical Parquet log."""
+    df, meta = io.ingest_log(entry, data_root, devices)
+    io.write_canonical(df, meta, canonical)
+
+
+def requantize(canonical: PathLike, settings: Mapping, requantized: PathLike) -> None:
+    """Truth channels -> integer counts at every level (``settings``: ``config["requantize"]``,
+    updated with the log's own ``analysis.requantize``)."""
+    df, meta = io.read_canonical(canonical)
+    merged = dict(settings)
+    merged.update((meta.get("analysis") or {}).get("requantize") or {})
+    levels = analysis.plan_levels(meta, merged)
+    meta = dict(meta, levels=levels)
+    io.write_canonical(analysis.requantize(df, meta, levels), meta, requantized)
+
+
+def kinematics(requantized: PathLike, out: PathLike) -> None:
+    """Operational positions of truth and levels, Jacobian at the truth."""
+    req, meta = io.read_canonical(requantized)
+    io.write_canonical(analysis.kinematics_table(req, meta, meta["levels"]), meta, out)
+
+
+def derivatives(requantized: PathLike, settings: Mapping, export: list, out: PathLike) -> None:
+    """The exported derivative estimators (``settings``: ``config["derivatives"]``)."""
+    req, meta = io.read_canonical(requantized)
+    analysis.check_cutoffs(settings, meta)
+    io.write_canonical(analysis.export_derivatives(req, meta, meta["levels"], export), meta, out)
+
+
+def moments(requantized: PathLike, kinematics_path: PathLike, settings: Mapping,
+            moment_settings: Mapping, out: PathLike) -> None:
+    """Empirical error moments over the whole derivative-filter bank."""
+    req, meta = io.read_canonical(requantized)
+    kin, _ = io.read_canonical(kinematics_path)
+    analysis.check_cutoffs(settings, meta)
+    rows = analysis.empirical_rows(
+        req, kin, meta, meta["levels"], analysis.filter_bank(settings),
+        settings["architectures"], settle_tol=settings["settle_tol"],
+        ci_level=moment_settings["ci_level"], n_batches=moment_settings["n_batches"])
+    io.write_json({"log_id": meta["log_id"], "rows": rows}, out)
+
+
+def theory(requantized: PathLike, kinematics_path: PathLike, settings: Mapping,
+           out: PathLike) -> None:
+    """Table II, the exact model and the trajectory worst case for every row."""
+    req, meta = io.read_canonical(requantized)
+    kin, _ = io.read_canonical(kinematics_path)
+    analysis.check_cutoffs(settings, meta)
+    rows = analysis.theory_rows(req, kin, meta, meta["levels"], analysis.filter_bank(settings),
+                                settings["architectures"], settle_tol=settings["settle_tol"])
+    io.write_json({"log_id": meta["log_id"], "rows": rows}, out)
+
+
+def summary(inputs: Mapping[str, PathLike], out: PathLike) -> None:
+    """``summary.json`` from the blocks of the stages the log ran.
+
+    ``inputs`` holds ``canonical`` and, for the quantization stages, ``requantized``,
+    ``moments`` and ``theory``; for the paper-002 stage, ``lrde``; for the residual stage,
+    ``residuals`` (one ``residuals.json`` path or a list of them, one per measured channel).
+    A coarse log without a truth/measured pair takes its ``residuals`` block from the held-out
+    motion-model comparison of its ``lrde`` block (:mod:`enclab.lrde.compare`).
+    """
+    if "moments" in inputs:
+        req, meta = io.read_canonical(inputs["requantized"])
+        block = analysis.build_summary(
+            meta, meta["levels"], io.read_json(inputs["moments"])["rows"],
+            io.read_json(inputs["theory"])["rows"], analysis.centre_of(req, meta))
+    else:
+        _, meta = io.read_canonical(inputs["canonical"])
+        block = analysis.log_header(meta)
+    if "lrde" in inputs:
+        block["lrde"] = io.read_json(inputs["lrde"])
+    if "residuals" in inputs:
+        paths = inputs["residuals"]
+        paths = [paths] if isinstance(paths, (str, os.PathLike)) else list(paths)
+        block["residuals"] = residual_summary_block([io.read_json(p) for p in paths])
+    elif (block.get("lrde") or {}).get("residuals"):
+        block["residuals"] = block["lrde"]["residuals"]
+    io.write_json(block, out)
+
+
+def quantization_log(entry: Mapping, folder: PathLike, config: Mapping,
+                     data_root: PathLike) -> None:
+    """Every paper-000 stage of one log, ``ingest`` to ``summary``, into ``folder``.
+
+    The same calls, in the same order, as the per-stage rules of
+    ``workflow/rules/{ingest,quantization}.smk``; ``folder`` receives the files of
+    :data:`QUANTIZATION_OUTPUTS`.
+
+    Parameters
+    ----------
+    entry : dict
+        The log's normalised manifest entry.
+    folder : path-like
+        Output folder (created if needed).
+    config : dict
+        The workflow configuration (``devices``, ``requantize``, ``derivatives``, ``moments``).
+    data_root : path-like
+        The manifest's data root.
+    """
+    folder = Path(folder)
+    out = {name: folder / file for name, file in QUANTIZATION_OUTPUTS.items()}
+    d = config["derivatives"]
+    ingest(entry, data_root, config["devices"], out["canonical"])
+    requantize(out["canonical"], config["requantize"], out["requantized"])
+    kinematics(out["requantized"], out["kinematics"])
+    derivatives(out["requantized"], d, d["export"], out["derivatives"])
+    moments(out["requantized"], out["kinematics"], d, config["moments"], out["moments"])
+    theory(out["requantized"], out["kinematics"], d, out["theory"])
+    summary({k: out[k] for k in ("canonical", "requantized", "moments", "theory")},
+            out["summary"])
