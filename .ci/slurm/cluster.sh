@@ -36,10 +36,10 @@ install() {
     if [[ ! -e $policy ]]; then
         printf '#!/bin/sh\nexit 101\n' >"$policy" && chmod +x "$policy" && created=1
     fi
-    apt-get update -qq
-    apt-get install -y -q --no-install-recommends "${missing[@]}"
+    local rc=0
+    { apt-get update -qq && apt-get install -y -q --no-install-recommends "${missing[@]}"; } || rc=$?
     ((created)) && rm -f "$policy"
-    return 0
+    return $rc
 }
 
 # wait_for SECONDS DESCRIPTION COMMAND...: poll until COMMAND succeeds.
