@@ -119,11 +119,14 @@ CONF
 }
 
 # start_daemon NAME COMMAND...: run a daemon in the foreground mode in the background and keep
-# its pid in DIR/run/NAME.pid for stop.
+# its pid in DIR/run/NAME.fg.pid for stop. setsid puts it in a session of its own, so that a
+# Ctrl-C in the terminal reaches Snakemake (which then cancels its jobs through slurmctld) but not
+# the daemons; stop ends them. (In a script without job control the background child is no
+# group leader, so setsid does not fork and $! is the daemon itself.)
 start_daemon() {
     local name=$1
     shift
-    "$@" >>"$DIR/log/$name.out" 2>&1 &
+    setsid "$@" </dev/null >>"$DIR/log/$name.out" 2>&1 &
     echo $! >"$DIR/run/$name.fg.pid"
 }
 
