@@ -8,8 +8,9 @@ CORES  ?= 2
 CONFIG   ?=
 SMK_ARGS ?=
 STAMP  := $(VENV)/.installed
+SLURM_STAMP := $(VENV)/.installed-slurm
 
-.PHONY: run test test-fast report lint clean venv
+.PHONY: run test test-fast test-slurm report lint clean venv venv-slurm
 
 venv: $(STAMP)
 
@@ -18,6 +19,13 @@ $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --progress-bar on -c constraints.txt -e '.[test]'
+	@touch $@
+
+# The SLURM executor plugin (pip extra [slurm]), only for cluster runs and test-slurm.
+venv-slurm: $(SLURM_STAMP)
+
+$(SLURM_STAMP): $(STAMP)
+	$(BIN)/python -m pip install --quiet -c constraints.txt -e '.[test,slurm]'
 	@touch $@
 
 # A log that fails (bad input) stops only itself: --keep-going finishes the others, then a second
@@ -41,6 +49,12 @@ test: $(STAMP)
 
 test-fast: $(STAMP)
 	$(BIN)/python -m pytest -q -m "not slow"
+
+# Opt-in, needs root: installs Debian's SLURM and MariaDB packages, starts a one-node cluster on
+# localhost, runs the workflow through --executor slurm, compares with a local run, stops the
+# cluster (README "Running on a cluster (SLURM)"). Not part of `make test` or CI.
+test-slurm: $(SLURM_STAMP)
+	bash .ci/slurm/test.sh
 
 lint: $(STAMP)
 	$(BIN)/snakemake --lint 2>&1 | grep -v -i conda || true

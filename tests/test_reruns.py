@@ -4,7 +4,6 @@ the middle of a job, then rerun, ends with exactly the results of an uninterrupt
 The workspace is tiny (two short simulated Phantom runs and one low-resolution encoder log with
 a short sampler), so each workflow run takes a few seconds of work plus Snakemake's start-up.
 """
-import hashlib
 import os
 import signal
 import subprocess
@@ -17,14 +16,9 @@ import pytest
 from enclab import io
 from enclab.lrde import simulate as lrde_sim
 from enclab.simulate import phantom_protocol_run
-from workspace import lrde_entry, phantom_entry, snakemake_command, write_workspace
+from workspace import lrde_entry, phantom_entry, result_digests, snakemake_command, write_workspace
 
 pytestmark = pytest.mark.slow
-
-# Images carry no timestamps (save_figure strips them) but are compared only for existence:
-# byte-identity of PNGs across matplotlib builds is not a contract.
-COMPARED = {".json", ".csv", ".parquet", ".md"}
-
 
 def _workspace(path: Path) -> Path:
     data = path / "logs"
@@ -50,25 +44,17 @@ def _run(work: Path, *extra: str) -> subprocess.CompletedProcess:
     return proc
 
 
-def _digests(work: Path) -> dict[str, str]:
-    results = work / "results"
-    return {str(p.relative_to(results)): (hashlib.sha256(p.read_bytes()).hexdigest()
-                                          if p.suffix in COMPARED else "exists")
-            for p in sorted(results.rglob("*"))
-            if p.is_file() and "logs" not in p.parts and p.name != "report.html"}
-
-
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory):
     work = _workspace(tmp_path_factory.mktemp("reference"))
     _run(work)
-    return _digests(work)
+    return result_digests(work)
 
 
 def test_two_runs_are_byte_identical(reference, tmp_path):
     work = _workspace(tmp_path / "again")
     _run(work)
-    again = _digests(work)
+    again = result_digests(work)
     assert set(again) == set(reference)
     differ = sorted(k for k in reference if reference[k] != again[k])
     assert not differ, f"outputs differ between two runs: {differ}"
@@ -94,4 +80,4 @@ def test_sigkill_mid_job_then_rerun_matches_an_uninterrupted_run(reference, tmp_
     # After a SIGKILL the lock stays; --unlock is the documented first step of a rerun.
     _run(work, "--unlock")
     _run(work, "--rerun-incomplete")
-    assert _digests(work) == reference
+    assert result_digests(work) == reference

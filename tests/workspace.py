@@ -1,6 +1,7 @@
 """Tiny workflow workspaces for the end-to-end tests (test_workflow.py, test_reruns.py)."""
 from __future__ import annotations
 
+import hashlib
 import sys
 from pathlib import Path
 
@@ -9,6 +10,9 @@ import yaml
 from enclab.lrde import simulate as lrde_sim
 
 ROOT = Path(__file__).resolve().parents[1]
+# Images carry no timestamps (save_figure strips them) but are compared only for existence:
+# byte-identity of PNGs across matplotlib builds is not a contract.
+COMPARED = {".json", ".csv", ".parquet", ".md"}
 SNAKEMAKE = Path(sys.executable).with_name("snakemake")
 
 
@@ -49,3 +53,16 @@ def write_workspace(work: Path, entries: list[dict], fig7_group: str) -> None:
 def snakemake_command(work: Path, *extra: str) -> list[str]:
     return [str(SNAKEMAKE), "--snakefile", str(ROOT / "Snakefile"), "--directory", str(work),
             "--configfile", str(work / "config.yaml"), "--cores", "2", *extra]
+
+
+def result_digests(work: Path) -> dict[str, str]:
+    """SHA-256 of every result under ``work/results`` whose bytes are a contract.
+
+    Keys are paths relative to ``results/``; images map to ``"exists"``. Per-rule logs and the
+    HTML report are left out (they hold times and paths).
+    """
+    results = work / "results"
+    return {str(p.relative_to(results)): (hashlib.sha256(p.read_bytes()).hexdigest()
+                                          if p.suffix in COMPARED else "exists")
+            for p in sorted(results.rglob("*"))
+            if p.is_file() and "logs" not in p.parts and p.name != "report.html"}
