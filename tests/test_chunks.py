@@ -111,7 +111,7 @@ def _digests(results):
                                           if p.suffix in COMPARED else "exists")
             for p in sorted(results.rglob("*"))
             if p.is_file() and "logs" not in p.parts and ".chunks" not in p.parts
-            and p.name != "report.html"}
+            and "benchmarks" not in p.parts and p.name != "report.html"}
 
 
 @pytest.fixture(scope="module")
@@ -146,7 +146,8 @@ def test_bad_logs_fail_alone_with_their_line_and_no_output(two_modes):
     assert "line 1236" in first.stderr
     assert "samples" in (work / "results/short/logs/quantization.log").read_text()
     for failed in ("bad", "short"):
-        outputs = [p.name for p in (work / "results" / failed).iterdir() if p.name != "logs"]
+        outputs = [p.name for p in (work / "results" / failed).iterdir()
+                   if p.name not in ("logs", "benchmarks")]
         assert outputs == [], f"{failed} left {outputs}"
     assert {p.name: p.read_bytes() for p in (work / "logs").iterdir()} == raw_before
 

@@ -14,6 +14,8 @@ rule batch_quantization:
         code=CODE_DIGEST,
     log:
         "results/batch/logs/batch_quantization.log",
+    benchmark:
+        "results/batch/benchmarks/batch_quantization.tsv"
     script:
         "../../scripts/batch_quantization.py"
 
@@ -28,6 +30,8 @@ rule ratio_figure:
         code=CODE_DIGEST,
     log:
         "results/batch/logs/ratio_figure.log",
+    benchmark:
+        "results/batch/benchmarks/ratio_figure.tsv"
     script:
         "../../scripts/ratio_figure.py"
 
@@ -47,5 +51,7 @@ rule paper_figures:
         code=CODE_DIGEST,
     log:
         "results/batch/logs/paper_figures.log",
+    benchmark:
+        "results/batch/benchmarks/paper_figures.tsv"
     script:
         "../../scripts/paper_figures.py"

@@ -51,6 +51,8 @@ rule publish_log:
     localrule: True
     log:
         "results/{log_id}/logs/quantization.log",
+    benchmark:
+        "results/{log_id}/benchmarks/quantization.tsv"
     shell:
         "cp {params.staged:q}.log {log:q}; "
         "if [ -e {params.staged:q}.failed ]; then cat {params.staged:q}.failed >&2; exit 1; fi; "

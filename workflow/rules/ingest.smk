@@ -13,5 +13,7 @@ rule ingest:
         code=CODE_DIGEST,
     log:
         "results/{log_id}/logs/ingest.log",
+    benchmark:
+        "results/{log_id}/benchmarks/ingest.tsv"
     script:
         "../../scripts/ingest.py"

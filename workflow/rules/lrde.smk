@@ -21,6 +21,8 @@ rule lrde_fit:
     threads: 1
     log:
         "results/{log_id}/logs/lrde_fit.log",
+    benchmark:
+        "results/{log_id}/benchmarks/lrde_fit.tsv"
     script:
         "../../scripts/lrde_fit.py"
 
@@ -34,5 +36,7 @@ rule batch_lrde:
         code=CODE_DIGEST,
     log:
         "results/batch/logs/batch_lrde.log",
+    benchmark:
+        "results/batch/benchmarks/batch_lrde.tsv"
     script:
         "../../scripts/batch_lrde.py"

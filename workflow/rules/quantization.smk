@@ -11,6 +11,8 @@ rule requantize:
         code=CODE_DIGEST,
     log:
         "results/{log_id}/logs/requantize.log",
+    benchmark:
+        "results/{log_id}/benchmarks/requantize.tsv"
     script:
         "../../scripts/requantize.py"
 
@@ -24,6 +26,8 @@ rule kinematics:
         code=CODE_DIGEST,
     log:
         "results/{log_id}/logs/kinematics.log",
+    benchmark:
+        "results/{log_id}/benchmarks/kinematics.tsv"
     script:
         "../../scripts/kinematics.py"
 
@@ -39,6 +43,8 @@ rule derivatives:
         code=CODE_DIGEST,
     log:
         "results/{log_id}/logs/derivatives.log",
+    benchmark:
+        "results/{log_id}/benchmarks/derivatives.tsv"
     script:
         "../../scripts/derivatives.py"
 
@@ -55,6 +61,8 @@ rule moments:
         code=CODE_DIGEST,
     log:
         "results/{log_id}/logs/moments.log",
+    benchmark:
+        "results/{log_id}/benchmarks/moments.tsv"
     script:
         "../../scripts/moments.py"
 
@@ -70,6 +78,8 @@ rule theory:
         code=CODE_DIGEST,
     log:
         "results/{log_id}/logs/theory.log",
+    benchmark:
+        "results/{log_id}/benchmarks/theory.tsv"
     script:
         "../../scripts/theory.py"
 
@@ -83,6 +93,8 @@ rule summary:
         code=CODE_DIGEST,
     log:
         "results/{log_id}/logs/summary.log",
+    benchmark:
+        "results/{log_id}/benchmarks/summary.tsv"
     script:
         "../../scripts/summary.py"
 
@@ -104,5 +116,7 @@ rule log_figures:
         code=CODE_DIGEST,
     log:
         "results/{log_id}/logs/log_figures.log",
+    benchmark:
+        "results/{log_id}/benchmarks/log_figures.tsv"
     script:
         "../../scripts/log_figures.py"
