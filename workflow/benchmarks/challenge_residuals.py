@@ -111,7 +111,7 @@ PAIRS = [("backlash", "latency"), ("angle_harmonics", "scale_mismatch"), ("hyste
 
 
 def _make_log(rng, names, scales):
-    duration = float(rng.uniform(10.0, 30.0))
+    duration = float(rng.uniform(10.0, 15.0))
     kind = str(rng.choice(["sine", "multisine", "smooth"]))
     amplitude = float(rng.uniform(0.5, 3.0))
     centre = float(rng.uniform(-np.pi, np.pi))
