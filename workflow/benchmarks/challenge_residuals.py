@@ -1,7 +1,7 @@
 """Challenge benchmark of the residual stage: undeclared effects in simulated two-channel logs.
 
 Each log: a 32768-cpr truth channel (rounding) and a 4096-cpr measured channel with a random
-quantizer offset, 1 kHz, 10-30 s, motion a sine, a multi-sine or a random smooth path of peak
+quantizer offset, 1 kHz, 10-15 s, motion a sine, a multi-sine or a random smooth path of peak
 amplitude 0.5-3 rad. The measured channel carries zero, one or two effects at datasheet-scale
 magnitudes; :func:`enclab.residuals.select.select_effects` sees only ``t, truth, measured,
 step, truth_step`` (and the line pitch of the encoder, 16 counts, a datasheet value, not an
