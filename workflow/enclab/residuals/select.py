@@ -451,7 +451,8 @@ def _intervals(fitted: _Fitted, ctx):
     meat = gb.T @ gb
     inv = np.linalg.pinv(info)
     sand = inv @ meat @ inv
-    var = np.maximum(np.diag(inv), np.diag(sand))
+    # diag of a PSD matrix, up to rounding: clip the -1e-30s of an ill-conditioned pinv
+    var = np.maximum(np.maximum(np.diag(inv), np.diag(sand)), 0.0)
     return np.sqrt(var) * scales
 
 
