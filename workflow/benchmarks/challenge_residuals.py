@@ -254,7 +254,7 @@ def summarize(df: pd.DataFrame) -> pd.DataFrame:
 
 def figure(summary: pd.DataFrame) -> Figure:
     fig = Figure(figsize=(11, 4.5))
-    axs = fig.subplots(1, 3)
+    axs = fig.subplots(1, 3, sharey=True)
     lab = [f"{k}: {t}" for k, t in zip(summary["kind"], summary["true"])]
     y = np.arange(len(lab))
     axs[0].barh(y, summary["exact_rate"], color="C0", label="exact set")
@@ -267,13 +267,13 @@ def figure(summary: pd.DataFrame) -> Figure:
     ok = np.isfinite(cov)
     axs[1].barh(y[ok], cov[ok], color="C1")
     axs[1].axvline(0.9, color="r", lw=0.8)
-    axs[1].set_yticks(y, [])
+    axs[1].tick_params(labelleft=False)
     axs[1].set_xlabel("coverage of 90 % intervals")
     axs[2].barh(y, summary["after_over_floor_median"], color="C2")
     axs[2].axvline(1.0, color="k", lw=0.8)
     axs[2].axvline(1.1, color="r", lw=0.8)
     axs[2].axvline(0.9, color="r", lw=0.8)
-    axs[2].set_yticks(y, [])
+    axs[2].tick_params(labelleft=False)
     axs[2].set_xlabel("after-residual std / exact floor (median)")
     fig.tight_layout()
     return fig
