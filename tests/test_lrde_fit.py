@@ -138,7 +138,7 @@ def test_sigma_range_bounds_the_jitter_posterior():
     r = fit.fit_sinusoid(t, c, STEP, seed=2, sigma_range=(0.01, 0.02), **kwargs)
     sigma_steps = r.samples[:, 4] / STEP
     assert sigma_steps.min() > 0.01 and sigma_steps.max() < 0.02
-    for bad in [(0.02, 0.01), (0.0, 0.1), (-1.0, 0.1)]:
+    for bad in [(0.02, 0.01), (0.0, 0.1), (-1.0, 0.1), (0.1, 1.0)]:
         with pytest.raises(ValueError, match="sigma_range"):
             fit.fit_sinusoid(t, c, STEP, seed=2, sigma_range=bad, **kwargs)
 

@@ -86,8 +86,12 @@ def _log_interval_prob(lower, upper):
     """``log(Phi(upper) - Phi(lower))`` for ``lower < upper``, accurate in both tails.
 
     Where one bound is deep (``|bound| > 8``, ``Phi(-8) = 6.2e-16``) the other alone decides:
-    ``log Phi(upper)`` or ``log Phi(-lower)``, with a relative error below ``6.2e-16`` of the
-    probability; this halves the special-function calls of a fit with small noise.
+    ``log Phi(upper)`` or ``log Phi(-lower)``; this halves the special-function calls of a fit
+    with small noise. The shortcut needs intervals at least a few standard deviations wide:
+    for ``lower = b > 8`` it drops ``Phi(-upper) / Phi(-b) ~ exp(-b w - w^2 / 2)`` with
+    ``w = upper - lower``, below ``1e-11`` for ``w >= 3``. The fit's intervals are
+    ``1 / s >= 10**0.5 = 3.2`` wide (the jitter prior stops at ``s = 10**-0.5`` steps); narrower
+    intervals need the exact difference.
     """
     out = np.zeros(np.broadcast(lower, upper).shape)
     lower_deep = lower < -_DEEP
@@ -496,8 +500,10 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
         log_sigma_bounds = _LOG_SIGMA_BOUNDS
     else:
         lo, hi = (float(v) for v in sigma_range)
-        if not (0 < lo < hi and np.isfinite(hi)):
-            raise ValueError(f"sigma_range must be (lo, hi) steps with 0 < lo < hi, got {sigma_range!r}")
+        if not (0 < lo < hi <= 10.0 ** _LOG_SIGMA_BOUNDS[1]):
+            raise ValueError(f"sigma_range must be (lo, hi) steps with 0 < lo < hi <= "
+                             f"{10.0 ** _LOG_SIGMA_BOUNDS[1]:.3f} (jitter beyond a third of a step "
+                             f"hides the readings' pattern), got {sigma_range!r}")
         log_sigma_bounds = (np.log10(lo), np.log10(hi))
     harmonics = _check_harmonics(harmonics)
     names = param_names(harmonics)
