@@ -115,6 +115,12 @@ def play_operator(x, width: float, y0: float | None = None) -> np.ndarray:
     return y
 
 
+def _span(ctx) -> float:
+    """Half-range of the offset-like parameters: 20 steps, or twice the residual's range when
+    that is larger (set by :func:`enclab.residuals.select._make_ctx`)."""
+    return float(getattr(ctx, "priv", {}).get("_span", 20.0 * ctx.step))
+
+
 class Effect:
     """Base class of an effect term.
 
@@ -222,7 +228,7 @@ class Hysteresis(Effect):
     order = 10
 
     def bounds(self, ctx):
-        lim = 20.0 * ctx.step
+        lim = _span(ctx)
         return [(-lim, lim)]
 
     def apply(self, theta, t, velocity, aux, params):
@@ -247,7 +253,7 @@ class Backlash(Effect):
     multistart = True
 
     def bounds(self, ctx):
-        lim = 20.0 * ctx.step
+        lim = _span(ctx)
         return [(-lim, lim)]
 
     def apply(self, theta, t, velocity, aux, params):
@@ -277,7 +283,7 @@ class AngleHarmonics(Effect):
         return float(np.ptp(ctx.truth)) >= 1.0
 
     def bounds(self, ctx):
-        lim = 20.0 * ctx.step
+        lim = _span(ctx)
         return [(-lim, lim)] * 4
 
     def apply(self, theta, t, velocity, aux, params):
@@ -369,7 +375,7 @@ class Latency(Effect):
 
     def bounds(self, ctx):
         vmax = float(np.max(np.abs(ctx.velocity)))
-        lim = 20.0 * ctx.step / vmax
+        lim = _span(ctx) / vmax
         return [(-lim, lim)]
 
     def apply(self, theta, t, velocity, aux, params):
@@ -395,7 +401,7 @@ class TimestampJitter(Effect):
 
     def bounds(self, ctx):
         vmax = float(np.max(np.abs(ctx.velocity)))
-        return [(0.0, 20.0 * ctx.step / vmax)]
+        return [(0.0, _span(ctx) / vmax)]
 
     def noise_std(self, theta, t, velocity, aux, params):
         return abs(params[0]) * np.abs(velocity)
@@ -420,7 +426,7 @@ class ScaleMismatch(Effect):
         return float(np.ptp(ctx.truth)) > 4.0 * ctx.step
 
     def bounds(self, ctx):
-        lim = 20.0 * ctx.step / max(float(np.ptp(ctx.truth)), ctx.step)
+        lim = _span(ctx) / max(float(np.ptp(ctx.truth)), ctx.step)
         return [(-lim, lim)]
 
     def apply(self, theta, t, velocity, aux, params):
@@ -443,7 +449,7 @@ class Compliance(Effect):
         return tq is not None and float(np.ptp(tq)) > 0
 
     def bounds(self, ctx):
-        lim = 20.0 * ctx.step / float(np.ptp(ctx.aux["torque"]))
+        lim = _span(ctx) / float(np.ptp(ctx.aux["torque"]))
         return [(-lim, lim)]
 
     def apply(self, theta, t, velocity, aux, params):

@@ -622,6 +622,10 @@ def _make_ctx(t, truth, counts, step, truth_step, aux, grid, line_pitch, fit_idx
     }
     if aux and aux.get("torque") is not None:
         priv["_torque_ref"] = float(np.mean(aux["torque"]))
+    if counts.size and np.any(counts):
+        # Parameter ranges scale with what the residual shows (MRDLab's play is ~32 steps of
+        # its output encoder), never below 20 steps.
+        priv["_span"] = max(20.0 * step, 2.0 * float(np.ptp(counts * step - truth)))
     if fit_idx is None:
         fit_idx = np.arange(t.size)
     return _Ctx(t, truth, v, step, truth_step, counts, grid, aux, priv, fit_idx)
