@@ -217,3 +217,15 @@ def test_flickering_truth_keeps_its_direction_through_a_dwell():
     ctx = sel._make_ctx(t, tri, np.zeros(600, np.int64), STEP, TRUTH_STEP, {}, 0.0, None)
     flip = np.flatnonzero(np.diff(ctx.priv["_motion_sign"]) != 0)
     assert flip.size == 1 and abs(int(flip[0]) - 299) <= 2
+
+
+def test_message_names_effects_whose_interval_spans_their_range():
+    from enclab.residuals.select import FittedEffect, _message
+    pinned = FittedEffect("backlash", {"w": 0.027}, {"w": (0.0267, 0.0273)}, 5e4, 10.0,
+                          derived={"confounded": 0.0})
+    loose = FittedEffect("scale_mismatch", {"g": 0.1}, {"g": (-0.1, 0.1)}, 600.0, 1.0,
+                         derived={"confounded": 1.0})
+    before = {"std": 1.0, "floor_ci": (0.1, 0.2)}
+    msg = _message([pinned, loose], False, before)
+    assert "scale_mismatch not pinned down" in msg and "backlash not" not in msg
+    assert "not pinned down" not in _message([pinned], True, before)

@@ -849,6 +849,13 @@ def select_effects(
             for name, j in zip(e.param_names, range(sl.start, sl.stop)):
                 ci[name] = (max(cur.x[j] - _Z90 * se[j], lows[j]), min(cur.x[j] + _Z90 * se[j], highs[j]))
         fitted_effects.append(FittedEffect(e.name, params, ci, dbic, gain, p, e.derived(params)))
+        # An interval clipped at both ends of the parameter's range (or a non-finite standard
+        # error) means the data do not pin the parameter down: typically two selected effects
+        # that are collinear over this motion (angle harmonics vs scale over a short stroke).
+        fitted_effects[-1].derived["confounded"] = float(e.kind != "discrete" and any(
+            not np.isfinite(se[j]) or (cur.x[j] - _Z90 * se[j] <= lows[j]
+                                       and cur.x[j] + _Z90 * se[j] >= highs[j])
+            for j in range(sl.start, sl.stop)))
     explained = after["std"] <= after["floor_ci"][1]
     message = _message(fitted_effects, explained, before)
     return SelectionResult(fitted_effects, before, after, bool(explained), message, steps,
@@ -866,6 +873,10 @@ def _message(effects, explained, before):
             return "the residual matches the exact-model quantization floor; no effect is needed"
         return "a significant residual remains that no candidate explains"
     names = " + ".join(_fmt(e) for e in effects)
+    confounded = [e.name for e in effects if e.derived.get("confounded")]
+    caveat = (f"; {', '.join(confounded)} not pinned down (interval spans its whole range: "
+              "confounded with the other effects over this motion)") if confounded else ""
     if explained:
-        return f"{names} explains the residual down to the exact-model quantization floor"
-    return f"{names} reduces the residual, but a significant residual remains that no candidate explains"
+        return f"{names} explains the residual down to the exact-model quantization floor{caveat}"
+    return (f"{names} reduces the residual, but a significant residual remains that no candidate "
+            f"explains{caveat}")
