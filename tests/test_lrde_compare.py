@@ -76,3 +76,16 @@ def test_compare_validates():
         fit.fit_sinusoid(t, c, STEP, seed=0, harmonics=(1,))
     with pytest.raises(ValueError, match="halves"):
         compare.compare_motion_models(t[:150], c[:150], STEP, 0, **SAMPLER)
+
+
+def test_report_warns_when_even_the_best_model_predicts_poorly():
+    models = [{"harmonics": [], "elpd": -1e4, "elpd_per_cycle": -2e3, "elpd_per_sample": -0.53,
+               "delta_elpd": 0.0, "delta_se": 0.0, "z": None},
+              {"harmonics": [3], "elpd": -1.1e4, "elpd_per_cycle": -2.2e3,
+               "elpd_per_sample": -0.58, "delta_elpd": -1e3, "delta_se": 700.0, "z": -1.4}]
+    motion = {"models": models, "chosen": [], "rule": "r"}
+    text = "\n".join(report._motion_model_lines(motion))
+    assert "predicts the held-out readings poorly" in text and "fits poorly" in text
+    models[0]["elpd_per_sample"] = -0.03
+    text = "\n".join(report._motion_model_lines(motion))
+    assert "poorly" not in text and "the paper's model stands" in text

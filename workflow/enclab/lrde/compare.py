@@ -159,6 +159,7 @@ def compare_motion_models(t, counts, step, seed, candidates=((), (3,)), n_draws=
         fold_gain = [float(a - b) for a, b in zip(folds, per_fold[0])]
         models.append({"harmonics": list(harmonics), "elpd": float(units[:n_units].sum()),
                        "elpd_per_cycle": float(units[:n_units].mean()),
+                       "elpd_per_sample": float(units.sum() / t.size),
                        "delta_elpd": delta, "delta_se": se,
                        "z": (delta / se) if se > 0 else None,
                        "delta_elpd_halves": fold_gain, "delta_bic": None})
