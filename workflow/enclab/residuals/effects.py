@@ -154,8 +154,13 @@ class Effect:
         return np.zeros(len(self.param_names))
 
     def bounds(self, ctx) -> list[tuple[float, float]]:
-        """Search range of each parameter, from the scales of the log in ``ctx``."""
-        raise NotImplementedError
+        """Search range of each parameter, from the scales of the log in ``ctx``.
+
+        Default: +-:func:`_span` for every parameter (offset-like parameters in rad);
+        effects with other units override it.
+        """
+        lim = _span(ctx)
+        return [(-lim, lim)] * len(self.param_names)
 
     def fd_steps(self, ctx) -> np.ndarray:
         """Finite-difference steps of the parameters (a small fraction of the range)."""
