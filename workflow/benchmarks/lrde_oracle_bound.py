@@ -28,8 +28,8 @@ import pathlib
 import numpy as np
 import pandas as pd
 
-from bench_lrde import COMMENSURATE_GAP, STEP, sampling_phase_gap
-from enclab.lrde import dwell, fit, model, simulate
+from bench_lrde import COMMENSURATE_GAP, STEP, sampling_phase_gap, simulate_draw
+from enclab.lrde import dwell, fit
 
 
 def grid_posterior(t, counts, A_grid, aeq_grid, f_hz, phase, sigma):
@@ -55,16 +55,8 @@ def weighted_median(values, weights):
 
 
 def one_draw(rng, n_cycles, fs_hz, f_nominal, noise_frac):
-    # Same draw sequence as bench_lrde.one_draw.
-    f_hz = f_nominal * rng.uniform(0.9, 1.1)
-    a_frac = rng.uniform(0, 1)
-    A12 = rng.uniform(3.0, 5.0) * STEP
-    half_eps = 0.5 * float(model.epsilon(A12, STEP))
-    E_b = rng.uniform(-half_eps, half_eps)
-    bias = E_b + 0.5 * STEP - a_frac * STEP
-    df, p = simulate.open_loop_log(rng, A12=A12, bias=bias, f_hz=f_hz, fs_hz=fs_hz,
-                                   n_cycles=n_cycles + 1, offset_frac=a_frac,
-                                   noise_std=noise_frac * STEP)
+    df, p = simulate_draw(rng, n_cycles, fs_hz, f_nominal, noise_frac)
+    A12, f_hz = p["A12"], p["f_hz"]
     t, c = df["t"].to_numpy(), df["counts"].to_numpy()
     A_true, aeq_true = A12 / STEP, p["a_eq"] / STEP
     # Coarse then fine grid around the truth (the oracle may look: it only sets the window).
