@@ -7,7 +7,6 @@ rules, and runs the two passes of ``make run``: the bad logs fail alone with the
 line and leave no output, and every other output is byte-identical to a run with one job per
 stage and log.
 """
-import hashlib
 import os
 import subprocess
 import sys
@@ -20,7 +19,8 @@ from enclab import io, runner, stages
 from enclab.errors import EnclabInputError
 from enclab.lrde import simulate as lrde_sim
 from enclab.simulate import phantom_protocol_run
-from workspace import SNAKEMAKE, lrde_entry, phantom_entry, snakemake_command, write_workspace
+from workspace import (SNAKEMAKE, lrde_entry, phantom_entry, result_digests, snakemake_command,
+                       write_workspace)
 
 
 def _process(entry, folder):
@@ -73,9 +73,6 @@ def test_quantization_outputs_match_the_rules():
 
 # ----------------------------------------------------------------------------- end to end
 
-COMPARED = {".json", ".csv", ".parquet", ".md"}
-
-
 def _workspace(work):
     data = work / "logs"
     data.mkdir(parents=True)
@@ -104,14 +101,6 @@ def _run(work, *extra):
     return subprocess.run(snakemake_command(work, "--keep-going", *extra), cwd=work,
                           capture_output=True, text=True, timeout=900,
                           env=dict(os.environ, MPLBACKEND="Agg"))
-
-
-def _digests(results):
-    return {str(p.relative_to(results)): (hashlib.sha256(p.read_bytes()).hexdigest()
-                                          if p.suffix in COMPARED else "exists")
-            for p in sorted(results.rglob("*"))
-            if p.is_file() and "logs" not in p.parts and ".chunks" not in p.parts
-            and "benchmarks" not in p.parts and p.name != "report.html"}
 
 
 @pytest.fixture(scope="module")
@@ -154,8 +143,8 @@ def test_bad_logs_fail_alone_with_their_line_and_no_output(two_modes):
 
 @pytest.mark.slow
 def test_chunked_outputs_are_byte_identical_to_one_job_per_stage(two_modes):
-    chunked = _digests(two_modes["chunked"][0] / "results")
-    per_rule = _digests(two_modes["per_rule"][0] / "results")
+    chunked = result_digests(two_modes["chunked"][0])
+    per_rule = result_digests(two_modes["per_rule"][0])
     # The per-stage mode keeps the outputs of the stages of 'short' that succeeded (ingest
     # ...); the chunked mode publishes a log whole or not at all. The rest is file for file.
     extra = set(per_rule) - set(chunked)
@@ -171,8 +160,8 @@ def test_chunked_outputs_are_byte_identical_to_one_job_per_stage(two_modes):
 @pytest.mark.slow
 def test_chunked_rerun_has_nothing_to_do(two_modes):
     work = two_modes["chunked"][0]
-    before = _digests(work / "results")
+    before = result_digests(work)
     again = _run(work, "--config", "chunk_size=10", "batch_scope=completed")
     assert again.returncode == 0, again.stderr[-3000:]
     assert "Nothing to be done" in again.stderr + again.stdout
-    assert _digests(work / "results") == before
+    assert result_digests(work) == before

@@ -59,11 +59,12 @@ def result_digests(work: Path) -> dict[str, str]:
     """SHA-256 of every result under ``work/results`` whose bytes are a contract.
 
     Keys are paths relative to ``results/``; images map to ``"exists"``. Per-rule logs,
-    benchmark files and the HTML report are left out (they hold times and paths).
+    benchmark files, the chunked mode's staging folders and the HTML report are left out (they
+    hold times and paths, or are not results).
     """
     results = work / "results"
     return {str(p.relative_to(results)): (hashlib.sha256(p.read_bytes()).hexdigest()
                                           if p.suffix in COMPARED else "exists")
             for p in sorted(results.rglob("*"))
-            if p.is_file() and "logs" not in p.parts and "benchmarks" not in p.parts
+            if p.is_file() and not {"logs", "benchmarks", ".chunks"} & set(p.parts)
             and p.name != "report.html"}

@@ -24,6 +24,7 @@ import yaml
 
 from enclab import io
 from enclab.quantize import quantize
+from enclab.residuals.effects import play_operator
 from enclab.lrde import simulate as lrde_sim
 from enclab.simulate import fig6_configurations_deg, phantom_protocol_run
 
@@ -123,16 +124,6 @@ def lrde_entries(out_dir: Path, seed: int) -> list[dict]:
     return entries
 
 
-def play(x: np.ndarray, width: float) -> np.ndarray:
-    """Play (backlash) operator: the output stays put until the input has crossed the play."""
-    y = np.empty_like(x)
-    y[0] = x[0]
-    half = width / 2
-    for k in range(1, x.size):
-        y[k] = min(max(y[k - 1], x[k] - half), x[k] + half)
-    return y
-
-
 def residual_entries(out_dir: Path, seed: int) -> list[dict]:
     """Two-channel logs for the residual stage: a motor encoder through a gearbox (the fine
     truth) and an 8192-cpr output encoder (the measured channel, its counter zero arbitrary),
@@ -150,7 +141,7 @@ def residual_entries(out_dir: Path, seed: int) -> list[dict]:
         rng = np.random.default_rng(ss)
         theta = np.deg2rad(20.0) * np.sin(2 * np.pi * 1.0 * t + rng.uniform(0, 2 * np.pi)) \
             + rng.uniform(0, out_step) + rng.normal(0, 1e-6, t.size)
-        load = play(theta, width) if width else theta
+        load = play_operator(theta, width) if width else theta
         zero = int(rng.integers(-5000, 5000))
         log = pd.DataFrame({"t": t,
                             "motor_counts": quantize(theta, motor_step),

@@ -58,8 +58,8 @@ _WORKER = textwrap.dedent('''
         started = time.perf_counter()
         r = fit.fit_sinusoid(t, c, STEP, seed=fit_seed, **settings)
         wall = time.perf_counter() - started
-        # One likelihood call: 16 walkers at the posterior's last positions.
-        init = fit.initial_guess(t, c, STEP)
+        # One likelihood call: 16 walkers at the posterior's last positions, converted by hand
+        # (older versions of enclab.lrde.fit have no _to_internal).
         last = r.chains[0, -1, :16].copy()
         internal = np.column_stack([last[:, 0] / STEP, last[:, 1] / STEP, last[:, 2],
                                     last[:, 3], np.log10(last[:, 4] / STEP)])

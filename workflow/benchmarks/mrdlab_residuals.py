@@ -47,6 +47,7 @@ from scipy import optimize
 from enclab import io
 from enclab.residuals import diagnostics as dg
 from enclab.residuals.pipeline import channel_values
+from enclab.residuals.effects import play_operator
 
 ROOT = Path(__file__).resolve().parents[2]
 TORQUE_STEP = 3.9811e-5  # N m per Futek count (PROVENANCE.md)
@@ -64,16 +65,6 @@ MODELS = {
 }
 
 
-def play(x: np.ndarray, width: float) -> np.ndarray:
-    """Play operator of total width ``width`` started at the first sample."""
-    y = np.empty_like(x)
-    y[0] = x[0]
-    half = width / 2
-    for k in range(1, x.size):
-        y[k] = min(max(y[k - 1], x[k] - half), x[k] + half)
-    return y
-
-
 def _design(effects, theta, v, torque, width):
     cols = [np.ones_like(theta)]
     if "scale" in effects:
@@ -83,7 +74,7 @@ def _design(effects, theta, v, torque, width):
     if "compliance" in effects:
         cols.append(torque - torque.mean())
     if "backlash" in effects:
-        cols.append(play(theta, width) - theta)
+        cols.append(play_operator(theta, width) - theta)
     return np.column_stack(cols)
 
 
