@@ -88,6 +88,83 @@ def test_streamed_franka_log_equals_in_memory_moments(tmp_path, config):
     assert len(got) == 3 * (10 + len(bank) * 10 + 24 * 3)
 
 
+def test_time_ranges_in_worker_processes_equal_in_memory_moments(tmp_path, config):
+    """The log split in time over 3 processes (each warmed up from rest before its range,
+    ranges starting inside row groups and inside batches) gives the in-memory rows; the
+    merge of the accumulators is exact up to round-off."""
+    meta, chunks = stream.franka_motion_chunks(12.0, 1000.0, seed=5, chunk_rows=2500)
+    path = tmp_path / "split.parquet"
+    io.write_canonical_chunks(chunks, meta, path)
+    df, meta = io.read_canonical(path)
+    levels = analysis.plan_levels(meta, config["requantize"])
+    derivatives, moments = config["derivatives"], config["moments"]
+    bank = [flt.DerivativeFilter.from_dict(dict(s)) for s in derivatives["export"]]
+    expected = in_memory_rows(df, meta, levels, bank, derivatives, moments)
+    warmup = stream.warmup_samples(bank, 1000.0)
+    ranges = stream.time_ranges(12_000, 3, warmup)
+    assert len(ranges) == 3 and ranges[0][0] == 0 and ranges[-1][1] == 12_000
+    assert all(hi - lo >= 4 * warmup for lo, hi in ranges)
+    timings, peaks = {}, []
+    got = stream.empirical_rows_from_file(
+        path, meta, levels, bank, derivatives["architectures"],
+        settle_tol=derivatives["settle_tol"], ci_level=moments["ci_level"],
+        n_batches=moments["n_batches"], workers=3, chunk_rows=733, timings=timings,
+        worker_peaks_mb=peaks)
+    assert_rows_equal(got, expected)
+    assert len(peaks) == 3 and set(stream.STAGES) <= set(timings)
+
+
+def test_time_ranges_are_fewer_when_the_log_is_short():
+    assert stream.time_ranges(1000, 4, 300) == [(0, 1000)]
+    assert stream.time_ranges(10_000, 2, 300) == [(0, 5000), (5000, 10_000)]
+    with pytest.raises(ValueError, match="workers must be at least 1"):
+        stream.time_ranges(10, 0, 1)
+
+
+def test_reading_a_row_range_gives_those_rows(tmp_path):
+    meta, chunks = stream.franka_motion_chunks(3.0, 1000.0, seed=2, chunk_rows=700)
+    path = tmp_path / "rows.parquet"
+    io.write_canonical_chunks(chunks, meta, path)
+    df, _ = io.read_canonical(path)
+    for start, stop in [(0, 3000), (650, 1450), (700, 1400), (2999, 3000), (1200, 1200)]:
+        _, n_rows, pieces = io.iter_canonical(path, batch_rows=300, start=start, stop=stop)
+        got = pd.concat(list(pieces) or [df.iloc[:0]], ignore_index=True)
+        assert n_rows == 3000
+        pd.testing.assert_frame_equal(got, df.iloc[start:stop].reset_index(drop=True))
+    with pytest.raises(ValueError, match="not inside its 3000 rows"):
+        io.iter_canonical(path, start=10, stop=3001)
+
+
+def test_trigonometry_table_equals_numpy_bit_for_bit():
+    """Look-ups of cos/sin of counts * step + offset are the values numpy computes, also after
+    the table grows; a span too large for a table is declined."""
+    rng = np.random.default_rng(9)
+    step, offset = 2 * np.pi / 2**20, 0.125
+    table = stream._TrigTable(step, offset)
+    for centre in (0, 50_000, -400_000):
+        counts = centre + np.cumsum(rng.integers(-40, 41, 20_000))
+        angle = counts.astype(np.float64) * step + offset
+        cos_q, sin_q = table.lookup(counts)
+        assert np.array_equal(cos_q, np.cos(angle)) and np.array_equal(sin_q, np.sin(angle))
+    assert table.lookup(np.array([0, stream._TrigTable.MAX_ENTRIES])) is None
+
+
+def test_joint_major_kinematics_equal_the_device_methods():
+    """The stream's kinematics (table trigonometry, frames composed column by column) give
+    device.forward and device.jacobian of the same angles."""
+    from enclab.kinematics import PhantomPremium15, franka_panda
+
+    rng = np.random.default_rng(4)
+    for device, step in ((franka_panda(), 2 * np.pi / 2**18), (PhantomPremium15(), 1e-4)):
+        n = device.n_joints
+        counts = np.cumsum(rng.integers(-30, 31, (n, 5000)), axis=1) + rng.integers(-9000, 9000, (n, 1))
+        theta = counts.astype(np.float64) * step
+        x, J = stream._Kinematics(device)("level", theta, counts, np.full(n, step))
+        np.testing.assert_allclose(x.T, device.forward(theta.T), rtol=0, atol=1e-15)
+        np.testing.assert_allclose(J.transpose(2, 0, 1), device.jacobian(theta.T),
+                                   rtol=0, atol=1e-15)
+
+
 def test_streamed_single_joint_without_device_and_random_pieces(config):
     """A single joint without kinematics (device rows absent), an offset quantizer, pieces of
     random sizes including 1-row pieces shorter than every start-up transient."""
@@ -128,7 +205,7 @@ def test_batch_moments_equal_error_moments_for_any_split(skip):
     acc = stream.BatchMoments(n, skip, 20, 3)
     cuts = np.sort(rng.choice(np.arange(1, n), 25, replace=False))
     for a, b in zip(np.r_[0, cuts], np.r_[cuts, n]):
-        acc.update(int(a), e[a:b])
+        acc.update(int(a), e[a:b].T)
     got = acc.result(0.95)
     for i in range(3):
         ref = error_moments(e[skip:, i], ci_level=0.95, n_batches=20)
@@ -140,9 +217,29 @@ def test_batch_moments_equal_error_moments_for_any_split(skip):
             assert a[i] == pytest.approx(b, rel=REL, abs=0.0)
 
 
+def test_batch_moments_of_adjacent_ranges_merge_to_the_whole():
+    rng = np.random.default_rng(3)
+    n, skip = 5_003, 40
+    e = rng.standard_normal((2, n)) + np.array([[3.0], [-0.2]])
+    whole = stream.BatchMoments(n, skip, 9, 2)
+    whole.update(0, e)
+    parts = [stream.BatchMoments(n, skip, 9, 2) for _ in range(3)]
+    for acc, (a, b) in zip(parts, [(0, 1_000), (1_000, 1_001), (1_001, n)]):
+        acc.update(a, e[:, a:b])
+    for acc in parts[1:]:
+        parts[0].merge(acc)
+    got, ref = parts[0].result(), whole.result()
+    assert got["n"] == ref["n"]
+    np.testing.assert_allclose(got["std"], ref["std"], rtol=REL)
+    np.testing.assert_array_equal(got["max_abs"], ref["max_abs"])
+    np.testing.assert_allclose(got["std_ci"], ref["std_ci"], rtol=REL)
+    with pytest.raises(ValueError, match="different batch layouts"):
+        parts[0].merge(stream.BatchMoments(n, skip, 8, 2))
+
+
 def test_batch_moments_reject_a_short_log():
     acc = stream.BatchMoments(100, 10, 5, 1)
-    acc.update(0, np.ones((60, 1)))
+    acc.update(0, np.ones((1, 60)))
     with pytest.raises(ValueError, match="expected 90 samples .* got 50"):
         acc.result()
     with pytest.raises(ValueError, match="fewer than 2 per batch"):

@@ -41,6 +41,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import resource
 import sys
 import time
@@ -48,6 +49,7 @@ from collections.abc import Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
+import scipy.signal
 
 from enclab import analysis
 from enclab import filters as flt
@@ -99,15 +101,15 @@ class BatchMoments:
         self.m2 = np.zeros((n_batches, k))
         self.max_abs = np.zeros(k)
 
-    def update(self, start: int, values: np.ndarray) -> None:
-        """Add ``values`` (shape ``(m, k)``), whose first row is sample ``start`` of the
-        whole signal; pieces must arrive in order."""
+    def update(self, start: int, rows: np.ndarray) -> None:
+        """Add ``rows`` (shape ``(k, m)``: one row per column of the signal, samples along
+        the row), whose first sample is sample ``start`` of the whole signal; pieces must
+        arrive in order. Rows keep the reductions on contiguous memory (about 3x faster than
+        down the columns of a sample-major block)."""
         first = max(start, self.skip)
-        if first >= start + values.shape[0]:
+        if first >= start + rows.shape[1]:
             return
-        # One row per column: the reductions then run over contiguous memory (about 3x
-        # faster than down the columns of a row-major block) and sum pairwise.
-        values = np.ascontiguousarray(values[first - start:].T)
+        values = rows[:, first - start:]
         pos = first - self.skip
         self.max_abs = np.maximum(self.max_abs, np.max(np.abs(values), axis=1))
         b = int(np.searchsorted(self.bounds, pos, side="right")) - 1
@@ -121,9 +123,13 @@ class BatchMoments:
 
     def _merge(self, b: int, piece: np.ndarray) -> None:
         """Merge ``piece`` (shape ``(k, m)``) into batch ``b``."""
-        n_p = piece.shape[1]
         mean_p = piece.mean(axis=1)
         m2_p = ((piece - mean_p[:, np.newaxis]) ** 2).sum(axis=1)
+        self._combine(b, piece.shape[1], mean_p, m2_p)
+
+    def _combine(self, b: int, n_p: int, mean_p: np.ndarray, m2_p: np.ndarray) -> None:
+        """Chan's pairwise update of batch ``b`` with ``n_p`` samples of mean ``mean_p`` and
+        squared deviations ``m2_p``."""
         n_a = int(self.count[b])
         if n_a == 0:
             self.mean[b], self.m2[b] = mean_p, m2_p
@@ -133,6 +139,16 @@ class BatchMoments:
             self.mean[b] = self.mean[b] + delta * (n_p / n)
             self.m2[b] = self.m2[b] + m2_p + delta**2 * (n_a * n_p / n)
         self.count[b] += n_p
+
+    def merge(self, later: "BatchMoments") -> None:
+        """Add the samples another accumulator of the same layout received, all of them
+        after this one's (a later time range of the same signal)."""
+        if not (later.n == self.n and later.skip == self.skip
+                and np.array_equal(later.sizes, self.sizes)):
+            raise ValueError("cannot merge accumulators of different batch layouts")
+        for b in np.flatnonzero(later.count):
+            self._combine(int(b), int(later.count[b]), later.mean[b], later.m2[b])
+        self.max_abs = np.maximum(self.max_abs, later.max_abs)
 
     def result(self, ci_level: float = 0.95) -> dict:
         """``mean``, ``std``, ``std_ci``, ``max_abs`` (arrays of shape ``(k,)``) and ``n``, as
@@ -166,19 +182,97 @@ class BatchMoments:
         }
 
 
-def _forward_and_jacobian(device, theta: np.ndarray, jacobian: bool = True):
-    """``device.forward(theta)`` and ``device.jacobian(theta)`` (or None), bit for bit.
+class _TrigTable:
+    """``cos`` and ``sin`` of ``counts * step + offset`` by table look-up, bit for bit.
 
-    A DH chain computes both from the same frames (``DHChain._axes``); computing those once
-    halves the cost of the kinematics, the most expensive stage for the Franka arm, while
-    the arithmetic stays exactly that of the two public methods.
+    The angles of a counts channel (and of every re-quantized level) take few distinct
+    values, and ``numpy.cos``/``numpy.sin`` of float64 cost ~18 ns a value on the
+    benchmark machine against ~2 ns for a look-up: trigonometry was three quarters of the
+    Franka kinematics. The table holds ``numpy.cos(k * step + offset)`` computed with the
+    same float operations as the angles themselves (``k.astype(float64) * step``, then
+    ``+ offset``), so a value looked up equals the value computed (``tests/test_stream.py``
+    checks). It grows to cover the counts seen; a channel whose counts would span more
+    than :attr:`MAX_ENTRIES` entries is not tabulated (``lookup`` returns None).
     """
-    if isinstance(device, DHChain):
-        z, p, end = device._axes(theta)
-        if not jacobian:
-            return end, None
-        return end, np.swapaxes(np.cross(z, end[:, np.newaxis, :] - p), 1, 2)
-    return device.forward(theta), (device.jacobian(theta) if jacobian else None)
+
+    MAX_ENTRIES = 1 << 22
+
+    def __init__(self, step: float, offset: float) -> None:
+        self.step, self.offset = float(step), float(offset)
+        self.lo, self.cos, self.sin = 0, np.empty(0), np.empty(0)
+
+    def lookup(self, counts: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        k_min, k_max = int(counts.min()), int(counts.max())
+        hi = self.lo + self.cos.size - 1
+        if self.cos.size == 0 or k_min < self.lo or k_max > hi:
+            lo = k_min if self.cos.size == 0 else min(k_min, self.lo)
+            hi = k_max if self.cos.size == 0 else max(k_max, hi)
+            pad = (hi - lo) // 4 + 1024
+            lo, hi = lo - pad, hi + pad
+            if hi - lo + 1 > self.MAX_ENTRIES:
+                return None
+            q = np.arange(lo, hi + 1, dtype=np.int64).astype(np.float64) * self.step + self.offset
+            self.lo, self.cos, self.sin = lo, np.cos(q), np.sin(q)
+        index = counts - self.lo
+        return np.take(self.cos, index), np.take(self.sin, index)
+
+
+class _Kinematics:
+    """Forward kinematics and Jacobian of one device in the joint-major layout.
+
+    Angles come as rows ``(n, m)``; outputs are ``x`` ``(m_out, m)`` and ``J`` ``(m_out, n,
+    m)``. A DH chain is composed from the cosines and sines directly
+    (:meth:`enclab.kinematics.DHChain.frames_from_trig`), with table look-ups for counts;
+    any other device goes through its public ``forward`` / ``jacobian``. Either way the
+    values are those of ``device.forward`` and ``device.jacobian`` on the same angles.
+    """
+
+    def __init__(self, device) -> None:
+        self.device = device
+        self.dh = isinstance(device, DHChain)
+        self.tables: dict[tuple, _TrigTable | None] = {}
+
+    def _trig(self, key, theta: np.ndarray, counts: np.ndarray | None,
+              steps: np.ndarray | None):
+        offsets = self.device.theta_offset
+        if counts is not None:
+            cos_q, sin_q = np.empty_like(theta), np.empty_like(theta)
+            for i in range(theta.shape[0]):
+                table = self.tables.get((key, i), False)
+                if table is False:
+                    table = self.tables[(key, i)] = _TrigTable(steps[i], offsets[i])
+                found = None if table is None else table.lookup(counts[i])
+                if found is None:
+                    self.tables[(key, i)] = None
+                    q = theta[i] + offsets[i]
+                    cos_q[i], sin_q[i] = np.cos(q), np.sin(q)
+                else:
+                    cos_q[i], sin_q[i] = found
+            return cos_q, sin_q
+        q = theta + offsets[:, np.newaxis]
+        return np.cos(q), np.sin(q)
+
+    def __call__(self, key, theta: np.ndarray, counts: np.ndarray | None = None,
+                 steps: np.ndarray | None = None, jacobian: bool = True):
+        """``(x, J or None)`` at the angles ``theta`` (rows); ``counts``/``steps`` (rows of
+        int64 counts and one step per row, ``theta == counts * steps``) allow the look-up."""
+        if self.dh:
+            z, p, end = self.device.frames_from_trig(*self._trig(key, theta, counts, steps))
+            return end, (DHChain.jacobian_rows(z, p, end) if jacobian else None)
+        x = self.device.forward(theta.T).T
+        jac = self.device.jacobian(theta.T).transpose(1, 2, 0) if jacobian else None
+        return x, jac
+
+
+def _joint_architecture_rows(jac_q: np.ndarray, jac: np.ndarray, phi: np.ndarray,
+                             phi_err: np.ndarray) -> np.ndarray:
+    """:func:`enclab.analysis.joint_architecture_error` in the joint-major layout."""
+    out = np.zeros((jac.shape[0], phi.shape[1]))
+    for i in range(phi.shape[0]):
+        out += (jac_q[:, i] - jac[:, i]) * phi[i]
+    for i in range(phi.shape[0]):
+        out += jac_q[:, i] * phi_err[i]
+    return out
 
 
 class _Timer:
@@ -205,6 +299,160 @@ def _timed(pieces: Iterable, timer: _Timer) -> Iterator:
         yield piece
 
 
+class _Accumulation:
+    """The moments of every row of one log, fed piece by piece (joint-major signals).
+
+    Holds the batch accumulators of every row block, in the order
+    :func:`enclab.analysis.empirical_rows` emits them, and the filter states. Samples before
+    ``record_from`` only advance the filter states (the warm-up of a time range that does not
+    start the log); accumulations of consecutive time ranges combine with :meth:`merge`.
+    """
+
+    def __init__(self, meta: Mapping, levels: Sequence[Mapping],
+                 bank: Sequence[flt.DerivativeFilter], architectures: Sequence[str], *,
+                 settle_tol: float, n_batches: int) -> None:
+        fs = analysis._fs(meta)
+        self.n_total = n_total = int(meta["n_samples"])
+        device = analysis.device_of(meta)
+        self.units = analysis._signal_units(meta, device)
+        self.chans = analysis.truth_channels(meta)
+        self.joint_names = joint_names = [c["name"] for c in self.chans]
+        outputs = [] if device is None else list(device.output_names)
+        self.bank = list(bank)
+        self.coeffs = {f.label(): flt.transfer_function(f, fs) for f in bank}
+        skips = {f.label(): flt.settle_samples(f, fs, settle_tol) for f in bank}
+        self.device = device
+        self.joint_arch = device is not None and "joint" in architectures
+        operational = device is not None and "operational" in architectures
+        self.kinematics = None if device is None else _Kinematics(device)
+        self.truth_counts = all(c["storage"] == "counts" for c in self.chans)
+        self.truth_steps = np.array([float(c["step"]) if c["storage"] == "counts" else 0.0
+                                     for c in self.chans])
+        self.by_name = {c["name"]: c for c in self.chans}
+        self.blocks = []
+
+        def block(level, names, order, filt, arch, skip):
+            acc = BatchMoments(n_total, skip, n_batches, len(names))
+            self.blocks.append((level, names, order, filt, arch, acc))
+            return acc
+
+        self.plan = []
+        for level in levels:
+            label = level["label"]
+            entry = {"level": level, "pos_joint": block(label, joint_names, 0, None, None, 0),
+                     "pos_x": None, "filters": [],
+                     "steps": np.array([float(j["step"]) for j in level["joints"]])}
+            if device is not None:
+                entry["pos_x"] = block(label, outputs, 0, None, None, 0)
+            for filt in bank:
+                skip = skips[filt.label()]
+                f = {"filt": filt,
+                     "joint": block(label, joint_names, filt.d, filt, "joint", skip),
+                     "op": None, "ja": None}
+                if operational:
+                    f["op"] = block(label, outputs, filt.d, filt, "operational", skip)
+                if self.joint_arch and filt.d == 1:
+                    f["ja"] = block(label, outputs, filt.d, filt, "joint", skip)
+                entry["filters"].append(f)
+            self.plan.append(entry)
+        self.states: dict[tuple, np.ndarray] = {}
+
+    def _filter(self, key, filt, rows):
+        b, a = self.coeffs[filt.label()]
+        zi = self.states.get(key)
+        if zi is None:
+            zi = np.zeros((rows.shape[0], max(len(a), len(b)) - 1))
+        y, self.states[key] = scipy.signal.lfilter(b, a, rows, axis=-1, zi=zi)
+        return y
+
+    def feed(self, piece: pd.DataFrame, start: int, timer: _Timer,
+             record_from: int = 0) -> None:
+        """Add ``piece``, whose first row is sample ``start`` of the log; samples before
+        ``record_from`` only advance the filters."""
+        m = len(piece)
+        if start + m > self.n_total:
+            raise ValueError(f"the log has more rows than its n_samples = {self.n_total}")
+        cut = min(max(record_from - start, 0), m)
+
+        def update(acc, rows):
+            if cut < m:
+                acc.update(start + cut, rows[:, cut:])
+
+        columns = [piece[name].to_numpy() for name in self.joint_names]
+        theta = np.stack([analysis._truth_values(piece, c) for c in self.chans])
+        fine = np.stack(columns) if self.truth_counts else None
+        level_counts = [np.stack([analysis.level_counts(columns[i], self.by_name[j["name"]], j,
+                                                        entry["level"]["offset_frac"])
+                                  for i, j in enumerate(entry["level"]["joints"])])
+                        for entry in self.plan]
+        timer.lap("requantize")
+        kinematics = self.kinematics
+        if kinematics is not None:
+            x, J = kinematics("truth", theta, fine, self.truth_steps, jacobian=self.joint_arch)
+        timer.lap("kinematics")
+        phis = {}
+        if self.joint_arch:
+            for f in self.bank:
+                if f.d == 1:
+                    phis[f.label()] = self._filter(("truth", f.label()), f, theta)
+            timer.lap("filters")
+        for entry, counts in zip(self.plan, level_counts):
+            label = entry["level"]["label"]
+            theta_q = counts.astype(np.float64) * entry["steps"][:, np.newaxis]
+            err = theta_q - theta
+            if kinematics is not None:
+                xq, Jq = kinematics(label, theta_q, counts, entry["steps"],
+                                    jacobian=self.joint_arch)
+                timer.lap("kinematics")
+            update(entry["pos_joint"], err)
+            if kinematics is not None:
+                err_x = xq - x
+                update(entry["pos_x"], err_x)
+            timer.lap("moments")
+            for f in entry["filters"]:
+                filt = f["filt"]
+                y = self._filter((label, filt.label(), "joint"), filt, err)
+                timer.lap("filters")
+                update(f["joint"], y)
+                timer.lap("moments")
+                if f["op"] is not None:
+                    y_x = self._filter((label, filt.label(), "op"), filt, err_x)
+                    timer.lap("filters")
+                    update(f["op"], y_x)
+                    timer.lap("moments")
+                if f["ja"] is not None:
+                    y_ja = _joint_architecture_rows(Jq, J, phis[filt.label()], y)
+                    timer.lap("kinematics")
+                    update(f["ja"], y_ja)
+                    timer.lap("moments")
+
+    def merge(self, later: "_Accumulation") -> None:
+        """Add the accumulation of a later, adjacent time range of the same log."""
+        for (*_, acc), (*_, other) in zip(self.blocks, later.blocks):
+            acc.merge(other)
+
+    def rows(self, ci_level: float) -> list[dict]:
+        out = []
+        for level, names, order, filt, arch, acc in self.blocks:
+            s = acc.result(ci_level)
+            for i, name in enumerate(names):
+                row = analysis._row_head(level, name, order, filt, arch, self.units[name])
+                row["empirical"] = {
+                    "mean": float(s["mean"][i]), "std": float(s["std"][i]),
+                    "std_ci": [float(s["std_ci"][0][i]), float(s["std_ci"][1][i])],
+                    "max_abs": float(s["max_abs"][i]), "n": int(s["n"]),
+                }
+                out.append(row)
+        return out
+
+    def __getstate__(self):
+        # Sent back from a worker process: the accumulators are the result; the filter
+        # states and trigonometry tables are not needed any more.
+        state = dict(self.__dict__)
+        state["states"], state["kinematics"] = {}, None
+        return state
+
+
 def empirical_rows(pieces: Iterable[pd.DataFrame], meta: Mapping, levels: Sequence[Mapping],
                    bank: Sequence[flt.DerivativeFilter], architectures: Sequence[str], *,
                    settle_tol: float = 1e-9, ci_level: float = 0.95, n_batches: int = 20,
@@ -227,123 +475,117 @@ def empirical_rows(pieces: Iterable[pd.DataFrame], meta: Mapping, levels: Sequen
     -------
     list of dict
         The rows of :func:`enclab.analysis.empirical_rows`, in the same order.
+
+    Notes
+    -----
+    Every signal is held joint-major (one row per joint or output, samples along the row),
+    so the filters, the kinematics and the moments all work on contiguous rows.
     """
-    fs = analysis._fs(meta)
-    n_total = int(meta["n_samples"])
-    device = analysis.device_of(meta)
-    units = analysis._signal_units(meta, device)
-    joint_names = [c["name"] for c in analysis.truth_channels(meta)]
-    outputs = [] if device is None else list(device.output_names)
-    coeffs = {f.label(): flt.transfer_function(f, fs) for f in bank}
-    skips = {f.label(): flt.settle_samples(f, fs, settle_tol) for f in bank}
-    joint_arch = device is not None and "joint" in architectures
-    operational = device is not None and "operational" in architectures
-
-    # One accumulator per block of rows, in the order empirical_rows emits them.
-    blocks = []
-
-    def block(level, names, order, filt, arch, skip):
-        acc = BatchMoments(n_total, skip, n_batches, len(names))
-        blocks.append((level, names, order, filt, arch, acc))
-        return acc
-
-    plan = []
-    for level in levels:
-        label = level["label"]
-        entry = {"level": level, "pos_joint": block(label, joint_names, 0, None, None, 0),
-                 "pos_x": None, "filters": []}
-        if device is not None:
-            entry["pos_x"] = block(label, outputs, 0, None, None, 0)
-        for filt in bank:
-            skip = skips[filt.label()]
-            f = {"filt": filt, "joint": block(label, joint_names, filt.d, filt, "joint", skip),
-                 "op": None, "ja": None}
-            if operational:
-                f["op"] = block(label, outputs, filt.d, filt, "operational", skip)
-            if joint_arch and filt.d == 1:
-                f["ja"] = block(label, outputs, filt.d, filt, "joint", skip)
-            entry["filters"].append(f)
-        plan.append(entry)
-
-    states: dict[tuple, np.ndarray] = {}
-
-    def run(key, filt, x):
-        b, a = coeffs[filt.label()]
-        zi = states.get(key)
-        if zi is None:
-            zi = np.zeros((max(len(a), len(b)) - 1, x.shape[1]))
-        import scipy.signal
-
-        y, states[key] = scipy.signal.lfilter(b, a, x, axis=0, zi=zi)
-        return y
-
+    acc = _Accumulation(meta, levels, bank, architectures, settle_tol=settle_tol,
+                        n_batches=n_batches)
     timer = _Timer(timings)
     start = 0
     for piece in _timed(pieces, timer):
-        m = len(piece)
-        if start + m > n_total:
-            raise ValueError(f"the log has more rows than its n_samples = {n_total}")
-        req = analysis.requantize(piece, meta, levels)
-        theta = analysis._angles(req, meta, None)
-        timer.lap("requantize")
-        if device is not None:
-            x, J = _forward_and_jacobian(device, theta)
-        timer.lap("kinematics")
-        phis = {}
-        if joint_arch:
-            for f in bank:
-                if f.d == 1:
-                    phis[f.label()] = run(("truth", f.label()), f, theta)
-            timer.lap("filters")
-        for entry in plan:
-            level = entry["level"]
-            label = level["label"]
-            theta_q = analysis._angles(req, meta, level)
-            err = theta_q - theta
-            xq = Jq = None
-            if device is not None:
-                xq, Jq = _forward_and_jacobian(device, theta_q, jacobian=joint_arch)
-                timer.lap("kinematics")
-            entry["pos_joint"].update(start, err)
-            if device is not None:
-                entry["pos_x"].update(start, xq - x)
-            timer.lap("moments")
-            for f in entry["filters"]:
-                filt = f["filt"]
-                y = run((label, filt.label(), "joint"), filt, err)
-                timer.lap("filters")
-                f["joint"].update(start, y)
-                timer.lap("moments")
-                if f["op"] is not None:
-                    y = run((label, filt.label(), "op"), filt, xq - x)
-                    timer.lap("filters")
-                    f["op"].update(start, y)
-                    timer.lap("moments")
-                if f["ja"] is not None:
-                    phi_q = run((label, filt.label(), "ja"), filt, theta_q)
-                    y = (np.einsum("kji,ki->kj", Jq, phi_q)
-                         - np.einsum("kji,ki->kj", J, phis[filt.label()]))
-                    timer.lap("filters")
-                    f["ja"].update(start, y)
-                    timer.lap("moments")
-        start += m
-    if start != n_total:
+        acc.feed(piece, start, timer)
+        start += len(piece)
+    if start != acc.n_total:
         raise ValueError(f"the log ended after {start} rows; its metadata says n_samples = "
-                         f"{n_total}")
-
-    rows = []
-    for level, names, order, filt, arch, acc in blocks:
-        s = acc.result(ci_level)
-        for i, name in enumerate(names):
-            row = analysis._row_head(level, name, order, filt, arch, units[name])
-            row["empirical"] = {
-                "mean": float(s["mean"][i]), "std": float(s["std"][i]),
-                "std_ci": [float(s["std_ci"][0][i]), float(s["std_ci"][1][i])],
-                "max_abs": float(s["max_abs"][i]), "n": int(s["n"]),
-            }
-            rows.append(row)
+                         f"{acc.n_total}")
+    rows = acc.rows(ci_level)
     timer.lap("moments")
     return rows
+
+
+#: Relative size of the impulse response below which a time range's warm-up ignores the
+#: samples before it: far below float64 resolution, so a range started from rest that
+#: early reaches the filter state of the whole-log recursion to round-off.
+WARMUP_TOL = 1e-20
+
+
+def warmup_samples(bank: Sequence[flt.DerivativeFilter], fs_hz: float) -> int:
+    """Samples a time range is filtered from rest before its first recorded sample."""
+    return max((flt.settle_samples(f, fs_hz, WARMUP_TOL) for f in bank), default=0)
+
+
+def time_ranges(n_samples: int, workers: int, warmup: int) -> list[tuple[int, int]]:
+    """Split ``[0, n_samples)`` into at most ``workers`` contiguous ranges, each at least
+    ``4 * warmup`` samples long (a range much shorter than its warm-up is not worth a
+    process)."""
+    if workers < 1:
+        raise ValueError(f"workers must be at least 1, got {workers}")
+    count = max(1, min(workers, n_samples // max(4 * warmup, 1)))
+    bounds = np.linspace(0, n_samples, count + 1).round().astype(np.int64)
+    return [(int(lo), int(hi)) for lo, hi in zip(bounds[:-1], bounds[1:])]
+
+
+def _range_worker(path: str, lo: int, hi: int, warmup: int, levels, bank_specs,
+                  architectures, settle_tol: float, n_batches: int, chunk_rows: int) -> tuple:
+    """One time range of a canonical file, in a worker process."""
+    from enclab import io
+
+    meta, _, pieces = io.iter_canonical(path, batch_rows=chunk_rows,
+                                        start=max(lo - warmup, 0), stop=hi)
+    bank = [flt.DerivativeFilter.from_dict(dict(spec)) for spec in bank_specs]
+    acc = _Accumulation(meta, levels, bank, architectures, settle_tol=settle_tol,
+                        n_batches=n_batches)
+    timings: dict = {}
+    timer = _Timer(timings)
+    start = max(lo - warmup, 0)
+    for piece in _timed(pieces, timer):
+        acc.feed(piece, start, timer, record_from=lo)
+        start += len(piece)
+    if start != hi:
+        raise ValueError(f"{path}: rows {lo}-{hi} ended after row {start}")
+    timer.lap("other")
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return acc, timings, usage.ru_maxrss / 1024.0
+
+
+def empirical_rows_from_file(path, meta: Mapping, levels: Sequence[Mapping],
+                             bank: Sequence[flt.DerivativeFilter],
+                             architectures: Sequence[str], *, settle_tol: float = 1e-9,
+                             ci_level: float = 0.95, n_batches: int = 20, workers: int = 1,
+                             chunk_rows: int = 16_384, timings: dict | None = None,
+                             worker_peaks_mb: list | None = None) -> list[dict]:
+    """:func:`empirical_rows` of a canonical Parquet file, split in time over processes.
+
+    Each of ``workers`` processes reads one contiguous time range of the file and feeds it
+    through the same stages; it starts :func:`warmup_samples` before its range, from rest,
+    so its filters reach the state of the whole-log recursion (to round-off: the impulse
+    response has decayed below ``1e-20`` of its peak) before the first sample it records.
+    The pointwise stages need no warm-up. The batch accumulators of the ranges are merged
+    in time order (Chan's update per batch), so the rows equal those of one pass to
+    round-off (``tests/test_stream.py``). ``workers=1`` reads the file in this process.
+
+    ``timings`` receives the seconds per stage summed over the workers; ``worker_peaks_mb``
+    each worker's peak resident memory.
+    """
+    n_total = int(meta["n_samples"])
+    fs = analysis._fs(meta)
+    ranges = time_ranges(n_total, workers, warmup_samples(bank, fs))
+    specs = [f.to_dict() for f in bank]
+    jobs = [(str(path), lo, hi, warmup_samples(bank, fs), list(levels), specs,
+             list(architectures), settle_tol, n_batches, chunk_rows) for lo, hi in ranges]
+    if len(jobs) == 1:
+        results = [_range_worker(*jobs[0])]
+    else:
+        import concurrent.futures
+        import multiprocessing
+
+        # spawn, not fork: the parent may hold Arrow's thread pool, which fork does not copy.
+        context = multiprocessing.get_context("spawn")
+        with concurrent.futures.ProcessPoolExecutor(len(jobs), mp_context=context) as pool:
+            results = list(pool.map(_range_worker, *zip(*jobs)))
+    total, _, _ = results[0]
+    for acc, _, _ in results[1:]:
+        total.merge(acc)
+    for _, worker_timings, peak in results:
+        if timings is not None:
+            for stage, seconds in worker_timings.items():
+                timings[stage] = timings.get(stage, 0.0) + seconds
+        if worker_peaks_mb is not None:
+            worker_peaks_mb.append(peak)
+    return total.rows(ci_level)
 
 
 # ----------------------------------------------------------------------------- generated log
@@ -423,7 +665,7 @@ def _moments_command(args) -> int:
         config = yaml.safe_load(handle)
     timings: dict = {}
     t0 = time.perf_counter()
-    meta, n_rows, pieces = io.iter_canonical(args.canonical, batch_rows=args.chunk_rows)
+    meta, n_rows, _ = io.iter_canonical(args.canonical)
     if n_rows != int(meta["n_samples"]):
         raise ValueError(f"{args.canonical}: {n_rows} rows but n_samples = {meta['n_samples']}")
     settings = dict(config["requantize"])
@@ -433,18 +675,27 @@ def _moments_command(args) -> int:
     analysis.check_cutoffs(derivatives, meta)
     bank = (analysis.filter_bank(derivatives) if args.bank == "config" else
             [flt.DerivativeFilter.from_dict(dict(s)) for s in derivatives["export"]])
-    rows = empirical_rows(pieces, meta, levels, bank, derivatives["architectures"],
-                          settle_tol=derivatives["settle_tol"],
-                          ci_level=config["moments"]["ci_level"],
-                          n_batches=config["moments"]["n_batches"], timings=timings)
+    workers = args.workers or len(os.sched_getaffinity(0))
+    peaks: list = []
+    rows = empirical_rows_from_file(args.canonical, meta, levels, bank,
+                                    derivatives["architectures"],
+                                    settle_tol=derivatives["settle_tol"],
+                                    ci_level=config["moments"]["ci_level"],
+                                    n_batches=config["moments"]["n_batches"], workers=workers,
+                                    chunk_rows=args.chunk_rows, timings=timings,
+                                    worker_peaks_mb=peaks)
     io.write_json({"log_id": meta["log_id"], "rows": rows}, args.out)
     if args.timings:
-        usage = resource.getrusage(resource.RUSAGE_SELF)
+        own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+        # Workers are separate processes; with more than one, the sum of every process's
+        # own peak bounds the memory in use at any moment (the peaks need not coincide).
+        peak = own if len(peaks) == 1 else own + sum(peaks)
         io.write_json({"n_samples": int(meta["n_samples"]), "n_joints": len(levels[0]["joints"]),
                        "n_levels": len(levels), "n_filters": len(bank), "n_rows": len(rows),
-                       "chunk_rows": args.chunk_rows, "stages_s": timings,
+                       "chunk_rows": args.chunk_rows, "workers": len(peaks),
+                       "stages_s": timings, "stages_note": "seconds summed over workers",
                        "total_s": time.perf_counter() - t0,
-                       "peak_rss_mb": usage.ru_maxrss / 1024.0}, args.timings)
+                       "peak_rss_mb": peak, "worker_peak_rss_mb": peaks}, args.timings)
     return 0
 
 
@@ -480,6 +731,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     m.add_argument("--bank", choices=("config", "export"), default="config",
                    help="filters: the whole derivatives.bank (default, as the moments rule) "
                         "or only derivatives.export")
+    m.add_argument("--workers", type=int, default=0,
+                   help="processes, each reading one time range of the log (default 0: one "
+                        "per available CPU; 1: read in this process)")
     m.add_argument("--timings", help="also write per-stage seconds and peak RSS (JSON)")
     args = parser.parse_args(argv)
     from enclab.errors import EnclabInputError
