@@ -11,13 +11,16 @@ In ONE run this script
    without their file I/O) and of the streamed moments (:func:`enclab.stream.empirical_rows`,
    all stages from the file);
 3. section ``stream``, long log, each in its own child process: ``read_table`` of the whole
-   file (median of ``--reps``), a streamed read that only decodes the pieces, and the streamed
-   analysis end to end (``python -m enclab.stream moments``, once: it is the long case), with
-   its time per stage.
+   file (median of ``--reps``; pyarrow decodes with every CPU), a streamed read that only
+   decodes the pieces, and the streamed analysis end to end (``python -m enclab.stream
+   moments``, once per ``--workers`` value: it is the long case), with its time per stage
+   (summed over its worker processes).
 
 Times are ratios to the ``read_table`` median of the *same file* measured in this run. Peak
 memory is each child's own ``getrusage(RUSAGE_SELF).ru_maxrss`` (so one case's peak cannot
-leak into another's). The table is printed and written to ``results/benchmarks/performance.csv``.
+leak into another's); for a streamed run with worker processes, the sum of the parent's and
+every worker's own peak (an upper bound of what was resident at once). The table is printed
+and written to ``results/benchmarks/performance.csv``.
 
 Other benchmarks append their own rows to the same CSV: every row has a ``section`` and a
 ``case``; a run replaces only the rows of the (section, case) pairs it measured, so
@@ -29,6 +32,7 @@ Usage::
     nice python workflow/benchmarks/bench_performance.py                 # 1 h log, full bank
     nice python workflow/benchmarks/bench_performance.py --duration-s 60 --only stream
     nice python workflow/benchmarks/bench_performance.py --long-bank export   # long run: 2 filters
+    python workflow/benchmarks/bench_performance.py --long-bank export --workers 1 2
 """
 from __future__ import annotations
 
@@ -229,30 +233,35 @@ def run_stream(long: pathlib.Path, args) -> list[dict]:
                        "--chunk-rows", str(args.chunk_rows)])
     rows.append(_row("stream", case, "read_streamed", n, piece["median_s"], read_s, 1,
                      rss=piece["peak_rss_mb"],
-                     notes=f"iter_batches({args.chunk_rows}) to pandas, nothing else"))
-    with tempfile.TemporaryDirectory(dir=OUT_DIR) as tmp:
-        timings = pathlib.Path(tmp) / "timings.json"
-        cmd = [sys.executable, "-m", "enclab.stream", "moments", str(long),
-               str(pathlib.Path(tmp) / "moments.json"), "--configfile",
-               str(ROOT / "config.yaml"), "--bank", args.long_bank, "--chunk-rows",
-               str(args.chunk_rows), "--timings", str(timings)]
-        t0 = time.perf_counter()
-        subprocess.run(cmd, check=True)
-        wall = time.perf_counter() - t0
-        t = json.loads(timings.read_text())
-    for stage, seconds in t["stages_s"].items():
-        if stage != "other":
-            rows.append(_row("stream", case, f"stream:{stage}", n, seconds, read_s, 1,
-                             notes="time inside the streamed run"))
-    rss = t["peak_rss_mb"]
-    rows.append(_row("stream", case, "stream_end_to_end", n, wall, read_s, 1, rss=rss,
-                     target=f"ratio <= {TARGET_RATIO:g}; peak <= {TARGET_RSS_MB:g} MB",
-                     met=f"time {'yes' if wall <= TARGET_RATIO * read_s else 'no'}; "
-                         f"memory {'yes' if rss <= TARGET_RSS_MB else 'no'}",
-                     notes=f"python -m enclab.stream moments, bank={args.long_bank} "
-                           f"({t['n_filters']} filters, {t['n_levels']} levels, "
-                           f"{t['n_rows']} rows), chunk {args.chunk_rows}; wall time incl. "
-                           f"interpreter start"))
+                     notes=f"row groups in pieces of {args.chunk_rows} rows to pandas, "
+                           f"nothing else, one process"))
+    for workers in args.workers:
+        with tempfile.TemporaryDirectory(dir=OUT_DIR) as tmp:
+            timings = pathlib.Path(tmp) / "timings.json"
+            cmd = [sys.executable, "-m", "enclab.stream", "moments", str(long),
+                   str(pathlib.Path(tmp) / "moments.json"), "--configfile",
+                   str(ROOT / "config.yaml"), "--bank", args.long_bank, "--chunk-rows",
+                   str(args.chunk_rows), "--workers", str(workers), "--timings", str(timings)]
+            t0 = time.perf_counter()
+            subprocess.run(cmd, check=True)
+            wall = time.perf_counter() - t0
+            t = json.loads(timings.read_text())
+        label = f"{t['workers']} worker{'s' if t['workers'] > 1 else ''}"
+        for stage, seconds in t["stages_s"].items():
+            if stage != "other":
+                rows.append(_row("stream", case, f"stream:{stage} ({label})", n, seconds,
+                                 read_s, 1, notes="seconds inside the streamed run, summed "
+                                                  "over its workers"))
+        rss = t["peak_rss_mb"]
+        rows.append(_row(
+            "stream", case, f"stream_end_to_end ({label})", n, wall, read_s, 1, rss=rss,
+            target=f"ratio <= {TARGET_RATIO:g}; peak <= {TARGET_RSS_MB:g} MB",
+            met=f"time {'yes' if wall <= TARGET_RATIO * read_s else 'no'}; "
+                f"memory {'yes' if rss <= TARGET_RSS_MB else 'no'}",
+            notes=f"python -m enclab.stream moments --workers {workers}, bank={args.long_bank} "
+                  f"({t['n_filters']} filters, {t['n_levels']} levels, {t['n_rows']} rows), "
+                  f"chunk {args.chunk_rows}; wall time incl. interpreter start; peak = sum of "
+                  f"the processes' own peaks when there are workers"))
     return rows
 
 
@@ -267,6 +276,9 @@ def main(argv=None) -> int:
     p.add_argument("--long-bank", choices=("config", "export"),
                    help="filters of the long streamed run (default: --bank)")
     p.add_argument("--chunk-rows", type=int, default=16_384)
+    p.add_argument("--workers", type=int, nargs="+", default=[0],
+                   help="worker processes of the long streamed run, one run per value "
+                        "(0: one per CPU, the command's default)")
     p.add_argument("--only", choices=("stages", "stream"), help="run one section only")
     p.add_argument("--out", type=pathlib.Path, default=OUT_DIR / "performance.csv")
     # internal: child workers
