@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import pathlib
 import subprocess
 import sys
@@ -96,6 +97,31 @@ def parse_impl(text):
     return name, pathlib.Path(path).resolve(), json.loads(settings) if settings else {}
 
 
+def write_performance_rows(summary, table, args, path):
+    """The ``mcmc`` section of the project's performance table (bench_performance.py)."""
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+    import bench_performance
+
+    load = os.getloadavg()[0]
+    rows = []
+    for _, s in summary.iterrows():
+        mine = table[table["impl"] == s["impl"]]
+        n = int(mine["n_samples"].median())
+        met = s["wall_median_s"] <= 3.0 and s["ess_min_min"] >= 1000
+        rows.append({
+            "section": "mcmc", "case": f"{args.cycles}-cycle LRDE fit, impl {s['impl']}",
+            "stage": "fit_sinusoid", "n_samples": n, "n_joints": 1, "reps": int(s["fits"]),
+            "median_s": round(float(s["wall_median_s"]), 3),
+            "samples_per_s": round(n / float(s["wall_median_s"])), "ratio_to_read": None,
+            "peak_rss_mb": None, "target": "median <= 3 s, min ESS >= 1000",
+            "met": "yes" if met else "no",
+            "notes": (f"min ESS median {s['ess_min_median']:.0f} (lowest {s['ess_min_min']:.0f}), "
+                      f"ESS/s {s['ess_per_s_median']:.0f}, R-hat max {s['rhat_max']:.4f}, "
+                      f"likelihood call {s['likelihood_call_ms_median']:.3f} ms; "
+                      f"settings {mine['settings'].iloc[0]}; load avg {load:.1f}")})
+    bench_performance.write_section(rows, path)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--impl", action="append", type=parse_impl,
@@ -131,6 +157,7 @@ def main(argv=None):
     out.mkdir(parents=True, exist_ok=True)
     table.to_csv(out / "lrde_throughput.csv", index=False)
     summary.to_csv(out / "lrde_throughput_summary.csv", index=False)
+    write_performance_rows(summary, table, args, out / "performance.csv")
     with pd.option_context("display.width", 200, "display.max_columns", 30):
         print(summary.to_string(index=False))
 
