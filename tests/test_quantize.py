@@ -71,6 +71,16 @@ def test_requantize_counts_worked_example():
     np.testing.assert_array_equal(requantize_counts(k, 8), [-2, -1, -1, 0, 0, 0, 0, 1, 1, 2])
 
 
+def test_requantize_by_powers_of_two_equals_integer_floor_division():
+    # The power-of-two path shifts instead of dividing; Python's // on ints is the reference.
+    k = np.concatenate([np.arange(-300, 300), [-(2**50) - 7, 2**50 + 5]])
+    for ratio in (1, 2, 8, 32, 1024, 3, 12):
+        for offset in (0.0, 0.5, 0.3):
+            shift = int(np.floor(offset * ratio))
+            expected = [(int(v) + shift) // ratio for v in k]
+            np.testing.assert_array_equal(requantize_counts(k, ratio, offset), expected)
+
+
 def test_requantize_tie_rule_gives_half_fine_step_mean():
     # Over one period of residues the error (coarse reading - fine reading) takes the
     # values {-3..4} fine steps for ratio 8 with rounding: mean +1/2 fine step.

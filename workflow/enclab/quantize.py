@@ -154,7 +154,12 @@ def requantize_counts(counts, ratio: int, offset_frac: float = 0.5) -> np.ndarra
     if not np.issubdtype(counts.dtype, np.integer):
         raise ValueError(f"counts must be an integer array, got dtype {counts.dtype}")
     shift = math.floor(Fraction(offset_frac) * ratio)
-    return (counts.astype(np.int64) + shift) // ratio
+    shifted = counts.astype(np.int64) + shift
+    if ratio & (ratio - 1) == 0:
+        # An arithmetic right shift is floor division by a power of two, also for negative
+        # counts, at a third of the cost of numpy's int64 floor_divide.
+        return shifted >> (ratio.bit_length() - 1)
+    return shifted // ratio
 
 
 def ratio_of(step: float, fine_step: float) -> int:
