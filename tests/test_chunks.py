@@ -7,10 +7,13 @@ rules, and runs the two passes of ``make run``: the bad logs fail alone with the
 line and leave no output, and every other output is byte-identical to a run with one job per
 stage and log.
 """
+import logging
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -62,6 +65,37 @@ def test_runner_one_line_errors():
     assert runner.error_line(err) == str(err)
     assert runner.error_line(ValueError("a\n   b")) == "a b"
     assert runner.error_line(RuntimeError("bug")) is None
+
+
+@pytest.fixture
+def root_logging():
+    # runner.run replaces the root logger's handlers, as in a job of its own; restore them.
+    root = logging.getLogger()
+    handlers, level = list(root.handlers), root.level
+    yield
+    for handler in root.handlers:
+        if handler not in handlers:
+            handler.close()
+    root.handlers[:] = handlers
+    root.setLevel(level)
+
+
+def test_run_logs_wall_and_cpu_time_or_one_error_line(tmp_path, root_logging):
+    # workflow/benchmarks/bench_batch.py reads the CPU time from a chunk job's log.
+    def smk(name):
+        return SimpleNamespace(log=[str(tmp_path / name)], rule="x", wildcards={"log_id": "a"})
+
+    runner.run(smk("ok.log"), lambda s: None)
+    assert re.search(r"\[a\] done in [0-9.]+ s, [0-9.]+ s CPU$",
+                     (tmp_path / "ok.log").read_text().strip())
+
+    def bad(s):
+        raise ValueError("cutoff 600 Hz\n  is at or above Nyquist")
+    with pytest.raises(SystemExit) as info:
+        runner.run(smk("bad.log"), bad)
+    assert info.value.code == 1
+    lines = (tmp_path / "bad.log").read_text().strip().splitlines()
+    assert len(lines) == 1 and lines[0].endswith("ERROR [a] cutoff 600 Hz is at or above Nyquist")
 
 
 def test_quantization_outputs_match_the_rules():
