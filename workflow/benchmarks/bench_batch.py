@@ -31,10 +31,15 @@ Columns of ``results/benchmarks/batch_overhead.csv`` (times in s):
 ``overhead_cpu_vs_parallel_per_log_s``
     ``(cpu - cpu of in-process xC) / N``: the overhead without the compute's own slow-down from
     sharing the machine, which no change to the workflow removes.
-``snakemake_cpu_s``, ``jobs_cpu_s``, ``chunk_jobs_cpu_s``
+``snakemake_cpu_s``, ``jobs_cpu_s``, ``chunk_jobs_cpu_s``, ``stages_in_jobs_cpu_s``
     Where a workflow run's CPU goes: the Snakemake process itself (DAG, scheduling, per-job
     bookkeeping), every job it started (and the ILP scheduler's solver processes, if used),
-    and of these the ``process_chunk`` jobs (each logs its own CPU time; batched mode only).
+    of these the ``process_chunk`` jobs (each logs its own CPU time), and inside those the
+    stages of each log (``run_chunk`` logs each log's CPU time); batched mode only.
+``own_cpu_per_log_s``
+    ``(cpu - stages_in_jobs_cpu) / N``: the CPU of everything but the stages' own work, from
+    one run alone (no reference run, so no run-to-run difference in how fast the same work
+    goes on a shared machine); batched mode only.
 
 Every mode's ``summary.json`` files are compared with the in-process ones (SHA-256): a mode
 whose outputs differ is reported as such (``identical`` column).
@@ -80,7 +85,9 @@ finally:
     with open(sys.argv[1], "w") as handle:
         handle.write(f"{usage.ru_utime + usage.ru_stime}\\n")
 """
-CHUNK_CPU = re.compile(r"done in [0-9.]+ s, ([0-9.]+) s CPU")
+# enclab.runner's last line of a job's log, and run_chunk's line for each log of a chunk.
+CHUNK_CPU = re.compile(r" INFO done in [0-9.]+ s, ([0-9.]+) s CPU$", re.MULTILINE)
+LOG_CPU = re.compile(r" INFO \[[^]]+\] done in [0-9.]+ s, ([0-9.]+) s CPU$", re.MULTILINE)
 
 
 def _entry(log_id: str) -> dict:
@@ -224,6 +231,7 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
 
     # The chunked mode also writes every log's derivatives.parquet (the per-stage mode only
     # for the logs with figures): ask both modes for it, so that they do the same work.
+    n = args.n
     targets = [f"results/{i}/{name}" for i in ids for name in ("summary.json",
                                                                 "derivatives.parquet")]
     for mode in modes:
@@ -242,18 +250,21 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
         identical = all(_digest(work / "results" / i / "summary.json") == reference[i]
                         for i in ids)
         snakemake_cpu = float(own_cpu.read_text())
-        chunk_logs = sorted((work / "results/logs/chunks").glob("chunk*.log"))
-        chunk_cpu = [float(m.group(1)) for path in chunk_logs
-                     for m in [CHUNK_CPU.search(path.read_text())] if m]
-        if len(chunk_cpu) != len(chunk_logs):
-            raise SystemExit(f"{mode}: a chunk log without its CPU time in {chunk_logs}")
+        chunk_logs = [path.read_text() for path in
+                      sorted((work / "results/logs/chunks").glob("chunk*.log"))]
+        chunk_cpu = [float(m.group(1)) for text in chunk_logs
+                     for m in [CHUNK_CPU.search(text)] if m]
+        stages_cpu = [float(m) for text in chunk_logs for m in LOG_CPU.findall(text)]
+        if len(chunk_cpu) != len(chunk_logs) or (chunk_logs and len(stages_cpu) != n):
+            raise SystemExit(f"{mode}: {len(chunk_cpu)} CPU times of {len(chunk_logs)} chunk "
+                             f"jobs and {len(stages_cpu)} of {n} logs in their logs")
         rows.append({"mode": mode, "chunk_size": size, "jobs": _jobs(log), "wall_s": wall,
                      "cpu_s": cpu, "identical": identical, "snakemake_cpu_s": snakemake_cpu,
                      "jobs_cpu_s": cpu - snakemake_cpu,
-                     "chunk_jobs_cpu_s": sum(chunk_cpu) if chunk_cpu else np.nan})
+                     "chunk_jobs_cpu_s": sum(chunk_cpu) if chunk_logs else np.nan,
+                     "stages_in_jobs_cpu_s": sum(stages_cpu) if chunk_logs else np.nan})
         load.append(os.getloadavg()[0])
 
-    n = args.n
     table = pd.DataFrame(rows)
     table.insert(1, "n_logs", n)
     table.insert(2, "log_s", args.duration)
@@ -263,6 +274,7 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
     table["overhead_cpu_per_log_s"] = (table["cpu_s"] - compute_cpu) / n
     table["overhead_wall_per_log_s"] = (table["wall_s"] - compute_wall / args.cores) / n
     table["overhead_cpu_vs_parallel_per_log_s"] = (table["cpu_s"] - compute_parallel_cpu) / n
+    table["own_cpu_per_log_s"] = (table["cpu_s"] - table["stages_in_jobs_cpu_s"]) / n
     table.loc[table["mode"].str.startswith("in-process"),
               ["overhead_cpu_per_log_s", "overhead_wall_per_log_s",
                "overhead_cpu_vs_parallel_per_log_s"]] = np.nan
