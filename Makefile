@@ -7,6 +7,8 @@ CORES  ?= 2
 #   make run CONFIG='manifest=data/manifest.real.yaml'   make run SMK_ARGS='--dry-run'
 CONFIG   ?=
 SMK_ARGS ?=
+# Snakemake finds a default profile only next to the Snakefile, so ours is named.
+PROFILE := --workflow-profile workflow/profiles/default
 STAMP  := $(VENV)/.installed
 SLURM_STAMP := $(VENV)/.installed-slurm
 
@@ -33,13 +35,13 @@ $(SLURM_STAMP): $(STAMP)
 # non-zero so the failure is not missed (each failed log's reason: results/<log_id>/logs/).
 run: $(STAMP)
 	@echo "==> running the workflow on the embedded default (config.yaml, $(CORES) cores)"
-	@if $(BIN)/snakemake --cores $(CORES) --printshellcmds --keep-going $(if $(CONFIG),--config $(CONFIG)) $(SMK_ARGS); then \
-		$(BIN)/snakemake --cores 1 --report results/report.html $(if $(CONFIG),--config $(CONFIG)) $(SMK_ARGS) && \
+	@if $(BIN)/snakemake $(PROFILE) --cores $(CORES) --printshellcmds --keep-going $(if $(CONFIG),--config $(CONFIG)) $(SMK_ARGS); then \
+		$(BIN)/snakemake $(PROFILE) --cores 1 --report results/report.html $(if $(CONFIG),--config $(CONFIG)) $(SMK_ARGS) && \
 		echo "==> done: results/ (summaries, batch tables, figures) and results/report.html"; \
 	else \
 		echo "==> some logs failed (messages above); batch tables and report from the rest"; \
-		$(BIN)/snakemake --cores $(CORES) --keep-going --config batch_scope=completed $(CONFIG) $(SMK_ARGS) && \
-		$(BIN)/snakemake --cores 1 --report results/report.html --config batch_scope=completed $(CONFIG) $(SMK_ARGS); \
+		$(BIN)/snakemake $(PROFILE) --cores $(CORES) --keep-going --config batch_scope=completed $(CONFIG) $(SMK_ARGS) && \
+		$(BIN)/snakemake $(PROFILE) --cores 1 --report results/report.html --config batch_scope=completed $(CONFIG) $(SMK_ARGS); \
 		exit 1; \
 	fi
 

@@ -7,10 +7,13 @@ rules, and runs the two passes of ``make run``: the bad logs fail alone with the
 line and leave no output, and every other output is byte-identical to a run with one job per
 stage and log.
 """
+import logging
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -45,7 +48,8 @@ def test_run_chunk_isolates_each_failure_and_leaves_no_partial_output(tmp_path):
     for ok in ("a", "c"):
         assert sorted(p.name for p in (chunk / ok).iterdir()) == ["first.json", "second.json"]
         assert not (chunk / f"{ok}.failed").exists()
-        assert "done in" in (chunk / f"{ok}.log").read_text()
+        assert re.search(rf"\[{ok}\] done in [0-9.]+ s, [0-9.]+ s CPU",
+                         (chunk / f"{ok}.log").read_text())
     for failed in ("bad", "bug"):
         assert not (chunk / failed).exists(), "a failed log must leave no output"
         assert (chunk / f"{failed}.failed").read_text().strip() == status[failed]
@@ -62,6 +66,37 @@ def test_runner_one_line_errors():
     assert runner.error_line(err) == str(err)
     assert runner.error_line(ValueError("a\n   b")) == "a b"
     assert runner.error_line(RuntimeError("bug")) is None
+
+
+@pytest.fixture
+def root_logging():
+    # runner.run replaces the root logger's handlers, as in a job of its own; restore them.
+    root = logging.getLogger()
+    handlers, level = list(root.handlers), root.level
+    yield
+    for handler in root.handlers:
+        if handler not in handlers:
+            handler.close()
+    root.handlers[:] = handlers
+    root.setLevel(level)
+
+
+def test_run_logs_wall_and_cpu_time_or_one_error_line(tmp_path, root_logging):
+    # workflow/benchmarks/bench_batch.py reads the CPU time from a chunk job's log.
+    def smk(name):
+        return SimpleNamespace(log=[str(tmp_path / name)], rule="x", wildcards={"log_id": "a"})
+
+    runner.run(smk("ok.log"), lambda s: None)
+    assert re.search(r"\[a\] done in [0-9.]+ s, [0-9.]+ s CPU$",
+                     (tmp_path / "ok.log").read_text().strip())
+
+    def bad(s):
+        raise ValueError("cutoff 600 Hz\n  is at or above Nyquist")
+    with pytest.raises(SystemExit) as info:
+        runner.run(smk("bad.log"), bad)
+    assert info.value.code == 1
+    lines = (tmp_path / "bad.log").read_text().strip().splitlines()
+    assert len(lines) == 1 and lines[0].endswith("ERROR [a] cutoff 600 Hz is at or above Nyquist")
 
 
 def test_quantization_outputs_match_the_rules():
@@ -165,3 +200,58 @@ def test_chunked_rerun_has_nothing_to_do(two_modes):
     assert again.returncode == 0, again.stderr[-3000:]
     assert "Nothing to be done" in again.stderr + again.stdout
     assert result_digests(work) == before
+
+
+# ------------------------------------------------------- staleness and publishing, chunked
+
+def _small_chunked(work):
+    """Three good logs in two chunks (chunk_size=2: good1 + good2, then good3), run once."""
+    data = work / "logs"
+    data.mkdir(parents=True)
+    entries = []
+    for k in (1, 2, 3):
+        log, _ = phantom_protocol_run(np.zeros(3), np.random.default_rng(k), duration_s=2.0)
+        io.write_table(log, data / f"good{k}.parquet")
+        entries.append(phantom_entry(f"good{k}", f"good{k}.parquet", "g"))
+    write_workspace(work, entries, fig7_group="g")
+    first = _run(work, *_SMALL_TARGETS)
+    assert first.returncode == 0, first.stderr[-3000:]
+    return work
+
+
+_SMALL_TARGETS = ("--config", "chunk_size=2", "--",
+                  *(f"results/good{k}/summary.json" for k in (1, 2, 3)))
+
+
+@pytest.mark.slow
+def test_chunked_changed_log_reruns_its_chunk_only(tmp_path):
+    work = _small_chunked(tmp_path)
+    summaries = {k: work / f"results/good{k}/summary.json" for k in (1, 2, 3)}
+    before = {k: (p.stat().st_ino, p.stat().st_mtime_ns, p.read_bytes())
+              for k, p in summaries.items()}
+    log, _ = phantom_protocol_run(np.full(3, 0.1), np.random.default_rng(7), duration_s=2.0)
+    io.write_table(log, work / "logs/good3.parquet")
+    again = _run(work, *_SMALL_TARGETS)
+    assert again.returncode == 0, again.stderr[-3000:]
+    # Snakemake finds the changed input: good3's chunk and publish job run, the other chunk
+    # and its logs' published files are left as they were.
+    assert "chunk=chunk0001" in again.stderr and "chunk=chunk0000" not in again.stderr
+    for k in (1, 2):
+        p = summaries[k]
+        assert (p.stat().st_ino, p.stat().st_mtime_ns, p.read_bytes()) == before[k]
+    assert summaries[3].read_bytes() != before[3][2]
+
+
+@pytest.mark.slow
+def test_chunked_publish_that_fails_midway_leaves_no_output(tmp_path):
+    work = _small_chunked(tmp_path)
+    # A staged file gone: publish_log links the others, then fails on this one; Snakemake
+    # must remove what it linked (publish_log writes no temporary names of its own).
+    (work / "results/.chunks/chunk0000/good1/theory.json").unlink()
+    broken = _run(work, "--force", *_SMALL_TARGETS[:2], "--", "results/good1/summary.json")
+    assert broken.returncode != 0
+    assert "publish_log" in broken.stderr
+    left = sorted(p.name for p in (work / "results/good1").iterdir()
+                  if p.name not in ("logs", "benchmarks"))
+    assert left == [], f"a failed publish left {left}"
+    assert (work / "results/good2/summary.json").exists()

@@ -5,6 +5,7 @@ import copy
 from pathlib import Path
 
 import pytest
+import yaml
 
 from enclab import io
 from enclab.errors import EnclabInputError
@@ -194,6 +195,17 @@ def test_read_manifest_yaml_syntax_error_names_the_line(tmp_path: Path):
     assert info.value.file == str(path) and info.value.row_label == "line"
     assert info.value.row is not None and 3 <= info.value.row <= 4
     assert "YAML syntax error" in str(info.value)
+
+
+def test_read_manifest_parses_as_pyyaml_safe_load():
+    # read_manifest uses libyaml's parser when PyYAML has it: the same entries as the
+    # pure-Python safe_load, checked on the embedded default (72 logs).
+    root = Path(__file__).resolve().parents[1]
+    path = root / "data/manifest.yaml"
+    devices = yaml.safe_load((root / "config.yaml").read_text())["devices"]
+    expected = validate_manifest(yaml.safe_load(path.read_text()), devices, str(path))
+    data_root, entries = io.read_manifest(path, devices)
+    assert len(entries) == 72 and (str(data_root), entries) == expected
 
 
 def test_read_manifest_schema_error_names_the_file(tmp_path: Path):

