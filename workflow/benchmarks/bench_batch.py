@@ -172,6 +172,30 @@ def _jobs(log: Path) -> int | None:
     return int(done[-1][1]) if done else None
 
 
+def write_performance_rows(table: pd.DataFrame, path: Path) -> None:
+    """The ``batch`` section of the project's performance table (bench_performance.py)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import bench_performance
+
+    rows = []
+    for _, r in table.iterrows():
+        workflow = not r["mode"].startswith("in-process")
+        rows.append({
+            "section": "batch", "case": f"{int(r['n_logs'])} logs x {r['log_s']:g} s, "
+                                        f"{r['mode']} (chunk {int(r['chunk_size'])})",
+            "stage": "overhead per log" if workflow else "compute", "n_samples": None,
+            "n_joints": 3, "reps": 1,
+            "median_s": round(float(r["overhead_cpu_per_log_s"] if workflow
+                                    else r["cpu_per_log_s"]), 4),
+            "samples_per_s": None, "ratio_to_read": None, "peak_rss_mb": None,
+            "target": "overhead <= 0.5 s CPU per log" if workflow else "",
+            "met": ("yes" if r["target_met"] else "no") if workflow else "",
+            "notes": (f"CPU s per log; wall {r['wall_per_log_s']:.3f} s per log, {int(r['jobs'])} "
+                      f"jobs, outputs identical: {r['identical']}, {int(r['cores'])} cores, "
+                      f"load {r['loadavg_1min']}")})
+    bench_performance.write_section(rows, path)
+
+
 def main(argv: list[str] | None = None) -> pd.DataFrame:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--n", type=int, default=500, help="number of logs (default 500)")
@@ -284,6 +308,7 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
     table["loadavg_1min"] = ",".join(f"{x:.1f}" for x in load)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     table.round(4).to_csv(args.out, index=False)
+    write_performance_rows(table, args.out.parent / "performance.csv")
     with pd.option_context("display.width", 200, "display.max_columns", 30):
         print(table.round(3).to_string(index=False))
     print(f"written {args.out}; workspace {work}"
