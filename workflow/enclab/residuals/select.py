@@ -608,10 +608,23 @@ def _smoothed_velocity(t, truth, truth_step):
     return v, v_eps
 
 
+def _smooth_correction(truth, truth_step):
+    """Smooth reconstruction of the angle minus the truth reading (rad): the Savitzky-Golay
+    smoothing of the velocity's window (21 samples, quadratic) for a quantized truth, zero for
+    a continuous one. Used where an effect acts on the physical angle within one truth step
+    (the play of :class:`enclab.residuals.effects.Backlash`)."""
+    n = truth.size
+    win = min(21, n - (1 - n % 2)) if n >= 5 else 0
+    if not truth_step or win < 5:
+        return np.zeros(n)
+    return signal.savgol_filter(truth, win, 2) - truth
+
+
 def _make_ctx(t, truth, counts, step, truth_step, aux, grid, line_pitch, fit_idx=None):
     v, v_eps = _smoothed_velocity(t, truth, truth_step) if t.size > 1 else (np.zeros(t.size), 0.0)
     vs = np.where(np.abs(v) > v_eps, v, 0.0)
     priv = {
+        "_smooth_correction": _smooth_correction(truth, truth_step),
         "_step": step,
         "_truth_step": truth_step,
         "_truth_var": truth_step**2 / 12.0,
