@@ -107,6 +107,28 @@ def test_backlash_narrower_than_the_truth_step_switches_at_the_reversal():
     np.testing.assert_array_equal(sel._smooth_correction(np.sin(t), 0.0), 0.0)
 
 
+def test_latency_behind_a_play_is_the_delayed_output_of_the_play():
+    # The measured side reads play(theta)(t - tau); the model composes effects by their order
+    # (select._Model), latency first. Its only errors are the first-order time shift,
+    # tau^2 max|a| / 2 = 6e-6 rad here, and the smoothed velocity: within 1e-5 rad. Delaying
+    # after the play instead (play(theta) - tau v) moves the reading while the play is taken
+    # up: tau v there reaches ~7e-4 rad (v = sqrt(2 w A) omega = 0.34 rad/s after a travel w).
+    from enclab.residuals import select as sel
+
+    t = np.arange(4000) / 1000.0
+    tau, w, a, om = 2e-3, 0.02, 0.3, np.pi
+    theta = a * np.sin(om * t)
+    exact = fx.play_operator(a * np.sin(om * (t - tau)), w)
+    ctx = sel._make_ctx(t, theta, np.zeros(t.size, np.int64), STEP, 0.0, {}, 0.0, None)
+    model = sel._Model([fx.Backlash(), fx.Latency()])
+    assert [e.name for e in model.effects] == ["latency", "backlash"]
+    mu, _ = model.forward(ctx, np.array([0.0, -1.0, tau, w]))
+    inner = slice(50, -50)  # the smoothed velocity's edge samples
+    assert np.max(np.abs(mu * STEP - exact)[inner]) < 1e-5
+    wrong = fx.play_operator(theta, w) - tau * ctx.velocity
+    assert np.max(np.abs(wrong - exact)[inner]) > 5e-4
+
+
 def test_play_operator_rejects_negative_width():
     with pytest.raises(ValueError, match="play width"):
         fx.play_operator([0.0, 1.0], -0.1)

@@ -380,11 +380,18 @@ class Latency(Effect):
 
     ``theta_eff(t) = theta(t - tau) ~ theta - tau v``. Signature: residual ``-tau v``,
     proportional to velocity. ``tau`` is signed (the measured channel may lead).
+
+    Applied first (``order`` 5): the reading is the whole measured side delayed, e.g.
+    ``play(theta)(t - tau)`` behind a gear, and a rate-independent operator commutes with a time
+    shift, ``play(theta)(t - tau) = play(theta(. - tau))(t)``, so the shift of the input is exact.
+    Applied after the play (``play(theta) - tau v``) it would move the reading while the play is
+    being taken up and the output stands still (challenge benchmark, backlash + latency: 3 of 10
+    logs covered both parameters with their 90 % intervals; 8 of 10 in this order).
     """
 
     name = "latency"
     param_names = ("tau",)
-    order = 25
+    order = 5
 
     def applicable(self, ctx) -> bool:
         return float(np.max(np.abs(ctx.velocity))) > 0
