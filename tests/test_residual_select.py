@@ -163,6 +163,34 @@ def test_hysteresis_below_the_truth_step_is_reported_indistinguishable_from_a_pl
         select_effects(log["t"], log["truth"], log["measured"], STEP, distinguish_bic=-1.0)
 
 
+def test_backward_check_drops_an_effect_that_a_later_one_made_redundant():
+    # A challenge-benchmark log (seed 3580810742: a random smooth path, angle harmonics at 3x
+    # their own threshold), its draws replayed as challenge_residuals._make_log makes them.
+    # Forward selection takes a scale mismatch first, then the harmonic, whose once-per-turn
+    # term also carries the slope; refitted without the scale the final model loses less than
+    # the criterion, so the scale goes.
+    rng = np.random.default_rng(3580810742)
+    duration = float(rng.uniform(10.0, 15.0))
+    kind = str(rng.choice(["sine", "multisine", "smooth"]))
+    amplitude = float(rng.uniform(0.5, 3.0))
+    centre = float(rng.uniform(-np.pi, np.pi))
+    motion = random_motion(rng, kind, duration, amplitude, centre)
+    rng.choice([-1.0, 1.0])
+    p1, p2 = rng.uniform(0, 2 * np.pi, 2)
+    a1, a2 = 0.5 * STEP * 0.2927746000827006, 0.2 * STEP * 0.2927746000827006
+    eff = {"a1": a1 * math.sin(p1), "b1": a1 * math.cos(p1), "a2": a2 * math.sin(p2), "b2": a2 * math.cos(p2)}
+    log = simulate_log(rng, motion, duration=duration, step=STEP, truth_step=TRUTH_STEP,
+                       effects={"angle_harmonics": eff})
+    res = select_effects(log["t"], log["truth"], log["measured"], STEP, truth_step=TRUTH_STEP,
+                         line_pitch=16 * STEP)
+    picked = [r["effect"] for r in res.steps if r.get("delta_heldout", -1.0) > 0]
+    assert picked == ["scale_mismatch", "angle_harmonics"]
+    (dropped,) = [r for r in res.steps if r["step"] == "backward"]
+    assert dropped["effect"] == "scale_mismatch" and dropped["delta_bic"] <= 10.0
+    assert [e.name for e in res.effects] == ["angle_harmonics"]
+    assert res.effects[0].delta_bic_final > 10.0 and res.explained
+
+
 def test_missed_counts_and_wrap_are_found():
     log = _log(5, {"missed_counts": {"times": [3.0], "jumps": [2]}})
     res = select_effects(log["t"], log["truth"], log["measured"], STEP, truth_step=TRUTH_STEP)

@@ -37,6 +37,9 @@ remaining candidate is fitted added to the current model; the one with the large
 If the best candidate fails, the next ones (by ``delta_bic``) are tried, at most
 ``max_tries``. Selection stops when no candidate passes or when, after an effect was added,
 the residual matches the exact-model floor within its interval (``SelectionResult.explained``).
+A backward check then refits the final model without each chosen effect: the weakest effect
+whose removal costs no more than ``bic_threshold`` is dropped (an early choice made redundant
+by later ones), and the check repeats; ``FittedEffect.delta_bic_final`` is that removal cost.
 The first round of candidates always runs: the likelihood detects effects that leave the
 residual std inside the floor's interval.
 
@@ -108,6 +111,7 @@ class FittedEffect:
     derived: dict = field(default_factory=dict)
     alternatives: list = field(default_factory=list)
     distinguish_bic: float = 10.0
+    delta_bic_final: float = float("nan")
 
     @property
     def indistinguishable(self) -> list:
@@ -124,6 +128,8 @@ class FittedEffect:
             "params": {k: float(v) for k, v in self.params.items()},
             "ci": {k: [float(v[0]), float(v[1])] for k, v in self.ci.items()},
             "delta_bic": float(self.delta_bic),
+            # BIC of the final model without this effect (refitted) minus BIC with it
+            "delta_bic_final": float(self.delta_bic_final),
             "delta_heldout": float(self.delta_heldout),
             "p_value": None if not np.isfinite(self.p_value) else float(self.p_value),
             "derived": {k: float(v) for k, v in self.derived.items()},
@@ -428,20 +434,32 @@ def _extend(cur: _Fitted, e, ctx):
     return _Fitted(model, x, ll)
 
 
-def _swap(cur: _Fitted, e, alt, ctx):
-    """``cur`` refitted with effect ``e`` replaced by ``alt`` (the other effects start where
-    they are)."""
+def _without(cur: _Fitted, e):
+    """``cur``'s model without effect ``e`` and the other parameters where they are (unfitted)."""
     keep = [i for i, f in enumerate(cur.model.effects) if f is not e]
     base = _Model([cur.model.effects[i] for i in keep])
     x = np.concatenate([cur.x[:2]] + [cur.x[cur.model.slices[i]] for i in keep])
-    return _extend(_Fitted(base, x, float("nan")), alt, ctx)
+    return _Fitted(base, x, float("nan"))
+
+
+def _swap(cur: _Fitted, e, alt, ctx):
+    """``cur`` refitted with effect ``e`` replaced by ``alt`` (the other effects start where
+    they are)."""
+    return _extend(_without(cur, e), alt, ctx)
+
+
+def _drop(cur: _Fitted, e, ctx):
+    """``cur`` refitted without effect ``e``."""
+    reduced = _without(cur, e)
+    x, ll = _fit(reduced.model, ctx, reduced.x)
+    return _Fitted(reduced.model, x, ll)
 
 
 def _alternatives(cur: _Fitted, chosen, step_trials, candidates, ctx, margin):
     """Swap-in delta BIC of the close alternatives of every chosen effect (module notes).
 
-    ``step_trials[j]`` maps candidate names to their delta BIC at step ``j`` (0-based); the
-    alternatives of the effect chosen there are the continuous candidates not in the final
+    ``step_trials[j]`` maps candidate names to their delta BIC at the step ``chosen[j]`` entered;
+    the alternatives of that effect are the continuous candidates not in the final
     model within ``3 * margin`` of it, and the step's runner-up.
     """
     n_fit = ctx.fit_idx.size
@@ -871,12 +889,14 @@ def select_effects(
 
     base_model = _Model([])
     x, ll = _fit(base_model, ctx, _base_start(ctx))
+    base_ll = ll
     # the offset c is only known modulo whole counts from a poor start: refine from the fit
     cur = _Fitted(base_model, x, ll)
     before = residual_stats(cur, full)
     chosen = []  # (effect, delta_bic, heldout, p)
     steps = []
     step_trials = []  # per step: {candidate name: delta_bic}
+    chosen_trials = []  # the step_trials entry of each chosen effect
     remaining = _candidates(ctx, candidates)
     all_candidates = list(remaining)
     for _ in range(max_effects):
@@ -919,11 +939,32 @@ def select_effects(
             break
         dbic, p, cand, e, new, gain = picked
         chosen.append((e, dbic, gain, p))
+        chosen_trials.append(step_trials[-1])
         remaining = [c for c in remaining if c is not cand]
         cur = new
 
+    # Backward check: an effect that entered early may be made redundant by later ones (a
+    # scale mismatch chosen before an angle harmonic whose once-per-turn term also carries the
+    # slope over a short stroke). Every effect must still be worth its parameters in the final
+    # model; the weakest one below the criterion is dropped and the check repeated.
+    kept_bic = {}
+    while len(chosen) > 1:
+        trial = []
+        for j, (e, *_) in enumerate(chosen):
+            reduced = _drop(cur, e, ctx)
+            k = cur.model.n_params() - reduced.model.n_params()
+            trial.append((2.0 * (cur.ll - reduced.ll) - k * math.log(n_fit), j, reduced))
+        d, j, reduced = min(trial, key=lambda r: r[0])
+        kept_bic = {chosen[i][0].name: v for v, i, _ in trial}
+        if d > bic_threshold:
+            break
+        steps.append({"step": "backward", "effect": chosen[j][0].name, "delta_bic": d, "removed": True})
+        del chosen[j], chosen_trials[j]
+        cur = reduced
+        kept_bic = {}
+
     after = residual_stats(cur, full)
-    alternatives = _alternatives(cur, chosen, step_trials, all_candidates, ctx, margin)
+    alternatives = _alternatives(cur, chosen, chosen_trials, all_candidates, ctx, margin)
     se = _intervals(cur, ctx)
     lows = [b[0] for b in cur.model.bounds(ctx)]
     highs = [b[1] for b in cur.model.bounds(ctx)]
@@ -938,7 +979,13 @@ def select_effects(
         else:
             for name, j in zip(e.param_names, range(sl.start, sl.stop)):
                 ci[name] = (max(cur.x[j] - _Z90 * se[j], lows[j]), min(cur.x[j] + _Z90 * se[j], highs[j]))
-        fitted_effects.append(FittedEffect(e.name, params, ci, dbic, gain, p, e.derived(params), alts, margin))
+        if e.name in kept_bic:
+            final_bic = kept_bic[e.name]
+        else:  # the only effect left: against the base model
+            k = cur.model.n_params() - base_model.n_params()
+            final_bic = 2.0 * (cur.ll - base_ll) - k * math.log(n_fit)
+        fitted_effects.append(FittedEffect(e.name, params, ci, dbic, gain, p, e.derived(params), alts, margin,
+                                           final_bic))
         # An interval clipped at both ends of the parameter's range (or a non-finite standard
         # error) means the data do not pin the parameter down: typically two selected effects
         # that are collinear over this motion (angle harmonics vs scale over a short stroke).
