@@ -79,6 +79,56 @@ def test_backlash_and_hysteresis_share_the_first_order_term_at_zero():
     np.testing.assert_allclose(Jh, -0.5 * sign, atol=1e-12)
 
 
+def test_backlash_narrower_than_the_truth_step_switches_at_the_reversal():
+    # A 1 Hz, 1 rad turn read by a truth with a 1 mrad step sits ~14 samples on its top level;
+    # a play of 0.3 truth steps takes up within ~3 samples of the reversal. On the smooth
+    # reconstruction (select._smooth_correction) the model's play switches within one sample of
+    # the physical one at every phase of the truth grid; on the truth reading it switches when
+    # the reading leaves its plateau (several samples off).
+    from enclab.residuals import select as sel
+
+    t = np.arange(2000) / 1000.0
+    ts, w = 1e-3, 0.3e-3
+    lags_model, lags_raw = [], []
+    for phase in np.linspace(0.0, 1.0, 11):
+        theta = np.cos(2 * np.pi * (t - 0.5)) + phase * ts
+        truth = ts * np.round(theta / ts)
+        aux = {"_smooth_correction": sel._smooth_correction(truth, ts)}
+
+        def switch(corr):  # first sample after 0.8 s where the correction changes sign (reversal at 1.0 s)
+            return 800 + int(np.flatnonzero(corr[800:] < 0)[0])
+
+        physical = switch(fx.play_operator(theta, w) - theta)
+        lags_model.append(switch(fx.Backlash().apply(truth, t, None, aux, [w]) - truth) - physical)
+        lags_raw.append(switch(fx.play_operator(truth, w) - truth) - physical)
+    assert max(abs(x) for x in lags_model) <= 1
+    assert max(abs(x) for x in lags_raw) >= 3
+    # a continuous truth has nothing to reconstruct
+    np.testing.assert_array_equal(sel._smooth_correction(np.sin(t), 0.0), 0.0)
+
+
+def test_latency_behind_a_play_is_the_delayed_output_of_the_play():
+    # The measured side reads play(theta)(t - tau); the model composes effects by their order
+    # (select._Model), latency first. Its only errors are the first-order time shift,
+    # tau^2 max|a| / 2 = 6e-6 rad here, and the smoothed velocity: within 1e-5 rad. Delaying
+    # after the play instead (play(theta) - tau v) moves the reading while the play is taken
+    # up: tau v there reaches ~7e-4 rad (v = sqrt(2 w A) omega = 0.34 rad/s after a travel w).
+    from enclab.residuals import select as sel
+
+    t = np.arange(4000) / 1000.0
+    tau, w, a, om = 2e-3, 0.02, 0.3, np.pi
+    theta = a * np.sin(om * t)
+    exact = fx.play_operator(a * np.sin(om * (t - tau)), w)
+    ctx = sel._make_ctx(t, theta, np.zeros(t.size, np.int64), STEP, 0.0, {}, 0.0, None)
+    model = sel._Model([fx.Backlash(), fx.Latency()])
+    assert [e.name for e in model.effects] == ["latency", "backlash"]
+    mu, _ = model.forward(ctx, np.array([0.0, -1.0, tau, w]))
+    inner = slice(50, -50)  # the smoothed velocity's edge samples
+    assert np.max(np.abs(mu * STEP - exact)[inner]) < 1e-5
+    wrong = fx.play_operator(theta, w) - tau * ctx.velocity
+    assert np.max(np.abs(wrong - exact)[inner]) > 5e-4
+
+
 def test_play_operator_rejects_negative_width():
     with pytest.raises(ValueError, match="play width"):
         fx.play_operator([0.0, 1.0], -0.1)

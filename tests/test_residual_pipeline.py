@@ -114,6 +114,21 @@ def test_summary_block_and_batch_rows(analysed):
     assert f"[{w_ci[0]:.4g}, {w_ci[1]:.4g}]" in rows[0]["effects"]
     assert pipeline.summary_block([]) is None
     assert pipeline.batch_rows({"log_id": "y"}) == []
+    # a 0.01 rad play (13 steps) is told apart from every alternative; both logs are explained
+    assert "runner-up" in rows[0]["effects"] and rows[0]["indistinguishable"] == ""
+    assert [r["verdict"] for r in rows] == ["explained", "explained"]
+
+
+def test_report_text_spells_out_indistinguishable_and_unexplained():
+    effect = {"name": "hysteresis", "params": {"h": 1e-4}, "ci": {"h": [0.9e-4, 1.1e-4]}, "delta_bic": 60.0,
+              "alternatives": [{"name": "backlash", "delta_bic": -0.01, "params": {"w": 1e-4}}],
+              "distinguish_bic": 10.0,
+              "indistinguishable_from": [{"name": "backlash", "delta_bic": -0.01, "params": {"w": 1e-4}}]}
+    text = pipeline.format_effects([effect])
+    assert "NOT DISTINGUISHABLE from backlash (swap-in dBIC 0.0 < 10)" in text
+    assert pipeline.indistinguishable_label([effect]) == "hysteresis~backlash (dBIC 0.0)"
+    assert pipeline.verdict(False, 18.04) == "unexplained (after/floor 18)"
+    assert pipeline.verdict(True, 1.01) == "explained"
 
 
 @pytest.mark.slow

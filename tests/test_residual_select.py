@@ -135,6 +135,60 @@ def test_round_trip_recovers_parameters_within_their_standard_error(name, params
     assert e.delta_bic > 10 and e.delta_heldout > 0
     assert res.after["std"] < 0.5 * res.before["std"]
     assert res.explained
+    # at these magnitudes every swap-in alternative loses by more than the margin
+    assert e.alternatives and e.indistinguishable == []
+    assert min(a["delta_bic"] for a in e.alternatives) > e.distinguish_bic
+    assert "not distinguishable" not in res.message
+
+
+def test_hysteresis_below_the_truth_step_is_reported_indistinguishable_from_a_play():
+    # h = 0.06 measured steps (half a truth step): a play of width w = h differs from the
+    # hysteresis only while the input travels w after a reversal, and on this seeded log no
+    # measured transition falls there, so both predict the same counts (equal likelihoods)
+    log = _log(21, {"hysteresis": {"h": 0.06 * STEP}})
+    res = select_effects(log["t"], log["truth"], log["measured"], STEP, truth_step=TRUTH_STEP)
+    (e,) = res.effects
+    assert e.name in ("hysteresis", "backlash")
+    other = {"hysteresis": "backlash", "backlash": "hysteresis"}[e.name]
+    (alt,) = [a for a in e.indistinguishable if a["name"] == other]
+    assert abs(alt["delta_bic"]) < 1.0
+    (p_chosen,), (p_alt,) = e.params.values(), alt["params"].values()
+    assert p_alt == pytest.approx(p_chosen, rel=0.05)
+    assert f"{e.name} not distinguishable from {other}" in res.message
+    block = json.loads(json.dumps(res.to_summary()))
+    d = block["effects"][0]
+    assert {"name", "params", "ci", "delta_bic"} <= set(d)
+    assert [a["name"] for a in d["indistinguishable_from"]] == [other] and d["distinguish_bic"] == 10.0
+    with pytest.raises(ValueError, match="distinguish_bic"):
+        select_effects(log["t"], log["truth"], log["measured"], STEP, distinguish_bic=-1.0)
+
+
+def test_backward_check_drops_an_effect_that_a_later_one_made_redundant():
+    # A challenge-benchmark log (seed 3580810742: a random smooth path, angle harmonics at 3x
+    # their own threshold), its draws replayed as challenge_residuals._make_log makes them.
+    # Forward selection takes a scale mismatch first, then the harmonic, whose once-per-turn
+    # term also carries the slope; refitted without the scale the final model loses less than
+    # the criterion, so the scale goes.
+    rng = np.random.default_rng(3580810742)
+    duration = float(rng.uniform(10.0, 15.0))
+    kind = str(rng.choice(["sine", "multisine", "smooth"]))
+    amplitude = float(rng.uniform(0.5, 3.0))
+    centre = float(rng.uniform(-np.pi, np.pi))
+    motion = random_motion(rng, kind, duration, amplitude, centre)
+    rng.choice([-1.0, 1.0])
+    p1, p2 = rng.uniform(0, 2 * np.pi, 2)
+    a1, a2 = 0.5 * STEP * 0.2927746000827006, 0.2 * STEP * 0.2927746000827006
+    eff = {"a1": a1 * math.sin(p1), "b1": a1 * math.cos(p1), "a2": a2 * math.sin(p2), "b2": a2 * math.cos(p2)}
+    log = simulate_log(rng, motion, duration=duration, step=STEP, truth_step=TRUTH_STEP,
+                       effects={"angle_harmonics": eff})
+    res = select_effects(log["t"], log["truth"], log["measured"], STEP, truth_step=TRUTH_STEP,
+                         line_pitch=16 * STEP)
+    picked = [r["effect"] for r in res.steps if r.get("delta_heldout", -1.0) > 0]
+    assert picked == ["scale_mismatch", "angle_harmonics"]
+    (dropped,) = [r for r in res.steps if r["step"] == "backward"]
+    assert dropped["effect"] == "scale_mismatch" and dropped["delta_bic"] <= 10.0
+    assert [e.name for e in res.effects] == ["angle_harmonics"]
+    assert res.effects[0].delta_bic_final > 10.0 and res.explained
 
 
 def test_missed_counts_and_wrap_are_found():
@@ -229,3 +283,18 @@ def test_message_names_effects_whose_interval_spans_their_range():
     msg = _message([pinned, loose], False, before)
     assert "scale_mismatch not pinned down" in msg and "backlash not" not in msg
     assert "not pinned down" not in _message([pinned], True, before)
+
+
+def test_message_says_unexplained_and_names_indistinguishable_alternatives():
+    from enclab.residuals.select import FittedEffect, _message
+    alts = [{"name": "backlash", "delta_bic": 1.7, "params": {"w": 1e-4}},
+            {"name": "latency", "delta_bic": 25.0, "params": {"tau": 1e-4}}]
+    e = FittedEffect("hysteresis", {"h": 1e-4}, {"h": (0.9e-4, 1.1e-4)}, 60.0, 5.0, alternatives=alts)
+    assert [a["name"] for a in e.indistinguishable] == ["backlash"]
+    before = {"std": 1.0e-3, "floor_std": 1e-4, "floor_ci": (0.9e-4, 1.1e-4)}
+    after = {"std": 1.8e-3 / 2, "floor_std": 1e-4, "floor_ci": (0.9e-4, 1.1e-4)}
+    msg = _message([e], False, before, after)
+    assert "the rest is unexplained" in msg and "9x the exact-model floor" in msg
+    assert "hysteresis not distinguishable from backlash (swap-in delta BIC 1.7)" in msg
+    assert "latency" not in msg
+    assert _message([], False, before).startswith("unexplained: the residual std 0.001 rad is 10x")

@@ -26,6 +26,7 @@ Usage (from the repository root; needs ../shared/data/real)::
     .venv/bin/python workflow/benchmarks/mrdlab_residuals.py                 # 40.TXT only
     .venv/bin/python workflow/benchmarks/mrdlab_residuals.py --all           # the 20 runs
     .venv/bin/python workflow/benchmarks/mrdlab_residuals.py --all --out results/analyses
+    .venv/bin/python workflow/benchmarks/mrdlab_residuals.py --library-candidates scale_mismatch hysteresis backlash compliance
 
 Writes ``mrdlab_models.csv`` (one row per run, channel and model) and ``mrdlab_residuals.md``.
 """
@@ -99,7 +100,7 @@ def fit_model(effects, theta, v, torque, r, train):
 
 
 def analyse_run(path: Path, entry: dict, devices: dict, channels=("theta_cui", "theta_front"),
-                use_library: bool = True) -> list[dict]:
+                use_library: bool = True, library_candidates=None) -> list[dict]:
     entry = copy.deepcopy(entry)
     entry["file"] = str(path.relative_to(ROOT.parent / "shared" / "data" / "real"))
     root = ROOT.parent / "shared" / "data" / "real"
@@ -143,11 +144,11 @@ def analyse_run(path: Path, entry: dict, devices: dict, channels=("theta_cui", "
             })
         if use_library:
             rows.append(_library_row(path, freq, load, name, t, theta, theta_step, measured, step, c,
-                                     torque))
+                                     torque, library_candidates))
     return rows
 
 
-def _library_row(path, freq, load, name, t, theta, theta_step, measured, step, c, torque):
+def _library_row(path, freq, load, name, t, theta, theta_step, measured, step, c, torque, candidates=None):
     try:
         from enclab.residuals.select import select_effects
     except ImportError:
@@ -155,13 +156,14 @@ def _library_row(path, freq, load, name, t, theta, theta_step, measured, step, c
                 "model": "library", "message": "enclab.residuals.select not installed"}
     start = time.perf_counter()
     res = select_effects(t, theta + c, measured, step, truth_step=theta_step,
-                         aux={"torque": torque}, seed=0)
+                         aux={"torque": torque}, seed=0, candidates=candidates)
     effects = "; ".join(
         f"{e.name}(" + ", ".join(f"{k}={v:.4g} [{e.ci[k][0]:.4g}, {e.ci[k][1]:.4g}]"
                                  for k, v in e.params.items()) + f", dBIC={e.delta_bic:.0f})"
         for e in res.effects)
     return {"file": path.name, "freq_hz": freq, "load_pct": load, "channel": name, "step": step,
-            "model": "library", "before_std": res.before["std"], "after_std": res.after["std"],
+            "model": "library" if candidates is None else "library(" + ",".join(candidates) + ")",
+            "before_std": res.before["std"], "after_std": res.after["std"],
             "floor_std": res.after.get("floor_std"), "effects": effects, "message": res.message,
             "explained": res.explained, "seconds": time.perf_counter() - start}
 
@@ -172,7 +174,7 @@ def markdown(table: pd.DataFrame) -> str:
              "model, and the held-out rms of the continuous fit (fit on one half, scored on the "
              "other), per channel, median over the runs analysed "
              f"({table['file'].nunique()} file(s)).", ""]
-    fits = table[table["model"] != "library"]
+    fits = table[~table["model"].str.startswith("library")]
     med = fits.groupby(["channel", "model"], sort=False)[
         ["before_std", "after_std", "heldout_rms", "floor_std", "bic"]].median()
     lines.append(med.to_markdown(floatfmt=".4g"))
@@ -181,10 +183,10 @@ def markdown(table: pd.DataFrame) -> str:
         ["file", "freq_hz", "load_pct", "channel", "scale", "play_width", "play_gain",
          "kappa_rad_per_Nm", "after_std"]]
     lines.append(full.to_markdown(index=False, floatfmt=".4g"))
-    lib = table[table["model"] == "library"]
+    lib = table[table["model"].str.startswith("library")]
     if len(lib):
         lines += ["", "Effect library (forward selection with the back-end torque as aux):", ""]
-        lines.append(lib[[c for c in ("file", "channel", "before_std", "after_std", "floor_std",
+        lines.append(lib[[c for c in ("file", "channel", "model", "before_std", "after_std", "floor_std",
                                       "explained", "effects", "message", "seconds")
                           if c in lib]].to_markdown(index=False, floatfmt=".4g"))
     return "\n".join(lines) + "\n"
@@ -195,6 +197,9 @@ def main(argv=None) -> int:
     parser.add_argument("--all", action="store_true", help="the 20 runs of the factorial set")
     parser.add_argument("--no-library", action="store_true", help="skip the effect library")
     parser.add_argument("--channels", nargs="+", default=["theta_cui", "theta_front"])
+    parser.add_argument("--library-candidates", nargs="+", default=None,
+                        help="effect names the library may choose from (default: all), e.g. the "
+                             "script's own set: scale_mismatch hysteresis backlash compliance")
     parser.add_argument("--out", type=Path, default=ROOT / "results" / "analyses")
     args = parser.parse_args(argv)
     data = ROOT.parent / "shared" / "data" / "real" / "mrdlab_davinci_tool" / "data" / "Tool_4_Maryland_L_2"
@@ -211,7 +216,7 @@ def main(argv=None) -> int:
     for path in files:
         start = time.perf_counter()
         rows += analyse_run(path, entry, config["devices"], tuple(args.channels),
-                            use_library=not args.no_library)
+                            use_library=not args.no_library, library_candidates=args.library_candidates)
         print(f"{path.name}: {time.perf_counter() - start:.1f} s", file=sys.stderr)
     table = pd.DataFrame(rows)
     args.out.mkdir(parents=True, exist_ok=True)

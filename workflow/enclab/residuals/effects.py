@@ -18,7 +18,9 @@ order of their ``order`` attribute (mechanics first, then the sensor, then the c
 ``aux`` is a dict of extra channels (e.g. ``{"torque": array}``) plus private entries the
 selection fills: ``"_step"`` (measured step, rad), ``"_offset"`` (``c``, counts),
 ``"_counts"`` (measured counts), ``"_theta_ref"`` (reference angle of the scale term, rad),
-``"_line_pitch"`` (rad).
+``"_line_pitch"`` (rad), ``"_motion_sign"`` (direction of the last motion) and
+``"_smooth_correction"`` (rad: a smooth reconstruction of the angle minus the truth reading,
+zero for a continuous truth).
 
 Each effect documents its *signature*: what the residual ``measured - truth`` looks like
 when the effect is present and not modelled. :meth:`Effect.signature` gives its linearisation
@@ -249,6 +251,13 @@ class Backlash(Effect):
     moves by ``w`` over an input travel of ``|w|`` (a ramp, unlike the instant step of the
     hysteresis) and then stays at ``-w/2`` (rising) or ``+w/2`` (falling). Both signs are
     physical and the two branches join smoothly at ``w = 0`` (interior null, regular chi2_1).
+
+    The play acts on the physical angle, so its correction ``play_|w|(x) - x`` is computed on a
+    smooth reconstruction ``x = theta + aux["_smooth_correction"]`` and added to ``theta``.
+    Applied to a quantized truth reading instead, a play narrower than the truth's step would
+    switch only when the reading leaves its plateau at a reversal, up to half a plateau after
+    the reversal itself: a model of the truth channel's quantization, not of the gear (challenge
+    benchmark: a 0.04-step play then lost to a hysteresis by 10-15 in delta BIC).
     """
 
     name = "backlash"
@@ -263,8 +272,10 @@ class Backlash(Effect):
 
     def apply(self, theta, t, velocity, aux, params):
         w = float(params[0])
-        p = play_operator(theta, abs(w))
-        return p if w >= 0 else 2.0 * theta - p
+        d = aux.get("_smooth_correction")
+        x = theta if d is None else theta + d
+        corr = play_operator(x, abs(w)) - x
+        return theta + corr if w >= 0 else theta - corr
 
     def derived(self, params):
         return {"play_width": abs(params["w"])}
@@ -369,11 +380,18 @@ class Latency(Effect):
 
     ``theta_eff(t) = theta(t - tau) ~ theta - tau v``. Signature: residual ``-tau v``,
     proportional to velocity. ``tau`` is signed (the measured channel may lead).
+
+    Applied first (``order`` 5): the reading is the whole measured side delayed, e.g.
+    ``play(theta)(t - tau)`` behind a gear, and a rate-independent operator commutes with a time
+    shift, ``play(theta)(t - tau) = play(theta(. - tau))(t)``, so the shift of the input is exact.
+    Applied after the play (``play(theta) - tau v``) it would move the reading while the play is
+    being taken up and the output stands still (challenge benchmark, backlash + latency: 3 of 10
+    logs covered both parameters with their 90 % intervals; 8 of 10 in this order).
     """
 
     name = "latency"
     param_names = ("tau",)
-    order = 25
+    order = 5
 
     def applicable(self, ctx) -> bool:
         return float(np.max(np.abs(ctx.velocity))) > 0

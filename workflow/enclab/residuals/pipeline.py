@@ -16,8 +16,9 @@ Settings (``config["residuals"]`` updated with the log's ``analysis.residuals``)
     Counts per line of the code disc (4 for quadrature decoding).
 ``n_bins``
     Bins over a revolution and over a line pitch.
-``alpha``, ``candidates``
-    Passed to ``select_effects`` (significance level; effect names to consider, null = all).
+``alpha``, ``candidates``, ``distinguish_bic``
+    Passed to ``select_effects`` (significance level; effect names to consider, null = all;
+    the swap-in delta BIC below which an alternative is reported as not distinguishable).
 ``aux``
     ``{library name: channel name}`` of extra channels handed to the effects (e.g.
     ``{torque: torque_back}`` for compliance against a logged torque).
@@ -35,7 +36,7 @@ import numpy as np
 import pandas as pd
 
 __all__ = ["residual_pairs", "channel_values", "analyse_channel", "before_after_table", "format_effects",
-           "summary_block", "batch_rows"]
+           "indistinguishable_label", "verdict", "summary_block", "batch_rows"]
 
 METRIC = "std of (measured - exact-model prediction) [rad]"
 
@@ -75,7 +76,7 @@ def _selector() -> Callable:
 
 def _settings(settings: Mapping | None) -> dict:
     out = {"offset": "fit", "line_pitch_counts": 4, "n_bins": 24, "alpha": 0.01, "candidates": None,
-           "aux": {}, "seed": 0, "step": None}
+           "distinguish_bic": 10.0, "aux": {}, "seed": 0, "step": None}
     unknown = set(settings or {}) - set(out)
     if unknown:
         raise ValueError(f"residuals settings: unknown key(s) {sorted(unknown)}; expected {sorted(out)}")
@@ -87,17 +88,48 @@ def _effects_label(effects) -> str:
     return ", ".join(e.name for e in effects) if effects else ""
 
 
+def _dbic(x: float) -> str:
+    """A swap-in delta BIC with one decimal; a tie the optimiser left a hair below zero is 0.0."""
+    return "0.0" if abs(x) < 0.05 else f"{x:.1f}"
+
+
 def format_effects(effects) -> str:
-    """``"backlash(w=0.01199 [0.01198, 0.012], dBIC=4.1e+04)"`` for the summary's effect dicts
-    (parameters with their 90 % intervals)."""
+    """``"backlash(w=0.01199 [0.01198, 0.012], dBIC=4.1e+04, runner-up hysteresis +312)"`` for the
+    summary's effect dicts: parameters with their 90 % intervals, and the best swap-in
+    alternative; an alternative the log cannot tell apart is spelled out
+    (``"NOT DISTINGUISHABLE from hysteresis (swap-in dBIC 1.7 < 10)"``)."""
     out = []
     for e in effects or []:
         ci = e.get("ci") or {}
         params = ", ".join(
             f"{k}={v:.4g}" + (f" [{ci[k][0]:.4g}, {ci[k][1]:.4g}]" if k in ci and ci[k] is not None else "")
             for k, v in (e.get("params") or {}).items())
-        out.append(f"{e['name']}({params}, dBIC={e.get('delta_bic', float('nan')):.3g})")
+        text = f"{e['name']}({params}, dBIC={e.get('delta_bic', float('nan')):.3g}"
+        alts = e.get("alternatives") or []
+        close = e.get("indistinguishable_from") or []
+        margin = e.get("distinguish_bic", float("nan"))
+        if close:
+            text += ", NOT DISTINGUISHABLE from " + " or ".join(
+                f"{a['name']} (swap-in dBIC {_dbic(a['delta_bic'])} < {margin:g})" for a in close)
+        elif alts:
+            text += f", runner-up {alts[0]['name']} {alts[0]['delta_bic']:+.3g}"
+        out.append(text + ")")
     return "; ".join(out)
+
+
+def indistinguishable_label(effects) -> str:
+    """``"hysteresis~backlash (dBIC 1.7)"`` for every chosen effect with alternatives the log
+    cannot tell apart, ``""`` when every choice is distinguished."""
+    return "; ".join(f"{e['name']}~{a['name']} (dBIC {_dbic(a['delta_bic'])})"
+                     for e in effects or [] for a in e.get("indistinguishable_from") or [])
+
+
+def verdict(explained, after_over_floor) -> str:
+    """``"explained"`` or ``"unexplained (after/floor 18)"``."""
+    if explained:
+        return "explained"
+    ratio = "n/a" if after_over_floor is None else f"{after_over_floor:.3g}"
+    return f"unexplained (after/floor {ratio})"
 
 
 def analyse_channel(df: pd.DataFrame, meta: Mapping, pair: Mapping, settings: Mapping | None = None,
@@ -163,6 +195,7 @@ def analyse_channel(df: pd.DataFrame, meta: Mapping, pair: Mapping, settings: Ma
     res = select(t, truth + offset, measured, step, truth_step=truth_step, aux=aux or None,
                  seed=int(np.random.SeedSequence(seed).generate_state(1)[0]),
                  candidates=cfg["candidates"], alpha=float(cfg["alpha"]),
+                 distinguish_bic=float(cfg["distinguish_bic"]),
                  line_pitch=int(cfg["line_pitch_counts"]) * step)
     # On the log the selection ran on (its truth, aux channels and counts, so that effects
     # needing the torque or the measured counts are included).
@@ -190,17 +223,19 @@ def analyse_channel(df: pd.DataFrame, meta: Mapping, pair: Mapping, settings: Ma
                                                   effects_label=_effects_label(res.effects)),
     }
     table = before_after_table(log_id, pair, step, diag, r_after, res.before, res.after,
-                               selection["effects"])
+                               selection["effects"], explained=bool(res.explained))
     return block, figures, table
 
 
-def before_after_table(log_id, pair, step, diag, r_after, lib_before, lib_after, effects) -> pd.DataFrame:
+def before_after_table(log_id, pair, step, diag, r_after, lib_before, lib_after, effects,
+                       explained: bool | None = None) -> pd.DataFrame:
     """One row per stage (exact model, with the selected effects) of one measured channel.
 
     ``std``, ``mean``, ``rms``, ``max_abs`` are those of this stage's residual
     (``measured - q(truth + c)`` before, ``measured - model_prediction`` after); ``floor_std``
     and its interval are the effect library's (``SelectionResult.before/after``); ``effects``
-    lists the selected effects with their 90 % intervals.
+    lists the selected effects with their 90 % intervals and alternatives (:func:`format_effects`);
+    ``verdict`` (after row) is :func:`verdict` of ``explained``.
     """
     from enclab.residuals import diagnostics as dg
 
@@ -214,6 +249,8 @@ def before_after_table(log_id, pair, step, diag, r_after, lib_before, lib_after,
                      "max_abs": m["max_abs"], "std_steps": m["std"] / step, "floor_std": floor,
                      "floor_ci_lo": ci[0], "floor_ci_hi": ci[1],
                      "std_over_floor": m["std"] / floor if floor else None,
+                     "verdict": verdict(explained, m["std"] / floor if floor else None)
+                     if stage == "after" and explained is not None else "",
                      "effects": format_effects(effects) if stage == "after" else ""})
     return pd.DataFrame(rows)
 
@@ -247,13 +284,16 @@ def batch_rows(summary: Mapping) -> list[dict]:
         before, after = sel.get("before") or {}, sel.get("after") or {}
         effects = sel.get("effects") or []
         floor = after.get("floor_std", before.get("floor_std"))
+        ratio = (after.get("std") / floor) if floor and after.get("std") is not None else None
         rows.append({
             "log_id": summary["log_id"], "measured": name, "truth": sel.get("truth"),
             "step": sel.get("step"), "truth_step": sel.get("truth_step"), "offset": sel.get("offset"),
             "before_std": before.get("std"), "after_std": after.get("std"), "floor_std": floor,
-            "after_over_floor": (after.get("std") / floor) if floor and after.get("std") is not None else None,
+            "after_over_floor": ratio,
             "explained": sel.get("explained"),
+            "verdict": verdict(sel.get("explained"), ratio),
             "effects": format_effects(effects),
+            "indistinguishable": indistinguishable_label(effects),
             "message": sel.get("message"),
         })
     return rows

@@ -37,8 +37,26 @@ remaining candidate is fitted added to the current model; the one with the large
 If the best candidate fails, the next ones (by ``delta_bic``) are tried, at most
 ``max_tries``. Selection stops when no candidate passes or when, after an effect was added,
 the residual matches the exact-model floor within its interval (``SelectionResult.explained``).
+A backward check then refits the final model without each chosen effect: the weakest effect
+whose removal costs no more than ``bic_threshold`` is dropped (an early choice made redundant
+by later ones), and the check repeats; ``FittedEffect.delta_bic_final`` is that removal cost.
 The first round of candidates always runs: the likelihood detects effects that leave the
 residual std inside the floor's interval.
+
+Alternatives
+------------
+Two effects can predict nearly the same readings on a given motion: a hysteresis and a play
+whose ramp (an input travel of ``|w|`` after each reversal) is shorter than the truth channel
+resolves, a latency and a hysteresis on a motion that reverses quickly, a scale mismatch and
+the linear part of an angle harmonic over a short stroke. For each chosen effect the final
+model is refitted with the effect *swapped* for each close alternative (the continuous
+candidates within ``3 * distinguish_bic`` of it at the step it was chosen, and that step's
+runner-up), giving the swap-in ``delta_bic = BIC(swapped) - BIC(chosen)``. An alternative with
+a swap-in ``delta_bic`` below ``distinguish_bic`` is *not distinguishable* on this log: the
+choice is reported with it (``FittedEffect.indistinguishable``, the message), never silently.
+The default margin is ``bic_threshold`` (10): an effect is added only on very strong evidence
+(``delta_bic > 10``, Kass & Raftery 1995), and one effect is preferred to another on the same
+standard; below it the odds between the two are at most ~150:1 ("strong" or weaker).
 
 Intervals
 ---------
@@ -91,16 +109,34 @@ class FittedEffect:
     delta_heldout: float
     p_value: float = float("nan")
     derived: dict = field(default_factory=dict)
+    alternatives: list = field(default_factory=list)
+    distinguish_bic: float = 10.0
+    delta_bic_final: float = float("nan")
+
+    @property
+    def indistinguishable(self) -> list:
+        """The alternatives whose swap-in ``delta_bic`` is below the margin (see module notes)."""
+        return [a for a in self.alternatives if a["delta_bic"] < self.distinguish_bic]
 
     def to_dict(self) -> dict:
+        def alt(a):
+            return {"name": a["name"], "delta_bic": float(a["delta_bic"]),
+                    "params": {k: float(v) for k, v in a["params"].items()}}
+
         return {
             "name": self.name,
             "params": {k: float(v) for k, v in self.params.items()},
             "ci": {k: [float(v[0]), float(v[1])] for k, v in self.ci.items()},
             "delta_bic": float(self.delta_bic),
+            # BIC of the final model without this effect (refitted) minus BIC with it
+            "delta_bic_final": float(self.delta_bic_final),
             "delta_heldout": float(self.delta_heldout),
             "p_value": None if not np.isfinite(self.p_value) else float(self.p_value),
             "derived": {k: float(v) for k, v in self.derived.items()},
+            # swap-in delta BIC (BIC with the alternative instead of this effect minus BIC with it)
+            "alternatives": [alt(a) for a in self.alternatives],
+            "distinguish_bic": float(self.distinguish_bic),
+            "indistinguishable_from": [alt(a) for a in self.indistinguishable],
         }
 
 
@@ -398,6 +434,54 @@ def _extend(cur: _Fitted, e, ctx):
     return _Fitted(model, x, ll)
 
 
+def _without(cur: _Fitted, e):
+    """``cur``'s model without effect ``e`` and the other parameters where they are (unfitted)."""
+    keep = [i for i, f in enumerate(cur.model.effects) if f is not e]
+    base = _Model([cur.model.effects[i] for i in keep])
+    x = np.concatenate([cur.x[:2]] + [cur.x[cur.model.slices[i]] for i in keep])
+    return _Fitted(base, x, float("nan"))
+
+
+def _swap(cur: _Fitted, e, alt, ctx):
+    """``cur`` refitted with effect ``e`` replaced by ``alt`` (the other effects start where
+    they are)."""
+    return _extend(_without(cur, e), alt, ctx)
+
+
+def _drop(cur: _Fitted, e, ctx):
+    """``cur`` refitted without effect ``e``."""
+    reduced = _without(cur, e)
+    x, ll = _fit(reduced.model, ctx, reduced.x)
+    return _Fitted(reduced.model, x, ll)
+
+
+def _alternatives(cur: _Fitted, chosen, step_trials, candidates, ctx, margin):
+    """Swap-in delta BIC of the close alternatives of every chosen effect (module notes).
+
+    ``step_trials[j]`` maps candidate names to their delta BIC at the step ``chosen[j]`` entered;
+    the alternatives of that effect are the continuous candidates not in the final
+    model within ``3 * margin`` of it, and the step's runner-up.
+    """
+    n_fit = ctx.fit_idx.size
+    in_model = {f.name for f in cur.model.effects}
+    pool = {c.name: c for c in candidates if not isinstance(c, str) and c.name not in in_model}
+    out = []
+    for j, (e, dbic, _, _) in enumerate(chosen):
+        trial = {k: v for k, v in step_trials[j].items() if k in pool}
+        names = {k for k, v in trial.items() if v >= dbic - 3.0 * margin}
+        if trial:
+            names.add(max(trial, key=trial.get))
+        alts = []
+        for name in sorted(names):
+            new = _swap(cur, e, pool[name], ctx)
+            k = new.model.n_params() - cur.model.n_params()
+            d = 2.0 * (cur.ll - new.ll) + k * math.log(n_fit)
+            i = new.model.effects.index(pool[name])
+            alts.append({"name": name, "delta_bic": float(d), "params": new.model.params_of(new.x, i)})
+        out.append(sorted(alts, key=lambda a: a["delta_bic"]))
+    return out
+
+
 def _discrete_candidate(name, cur: _Fitted, ctx):
     mu, _ = cur.model.forward(ctx, cur.x)
     if name == "missed_counts":
@@ -608,10 +692,23 @@ def _smoothed_velocity(t, truth, truth_step):
     return v, v_eps
 
 
+def _smooth_correction(truth, truth_step):
+    """Smooth reconstruction of the angle minus the truth reading (rad): the Savitzky-Golay
+    smoothing of the velocity's window (21 samples, quadratic) for a quantized truth, zero for
+    a continuous one. Used where an effect acts on the physical angle within one truth step
+    (the play of :class:`enclab.residuals.effects.Backlash`)."""
+    n = truth.size
+    win = min(21, n - (1 - n % 2)) if n >= 5 else 0
+    if not truth_step or win < 5:
+        return np.zeros(n)
+    return signal.savgol_filter(truth, win, 2) - truth
+
+
 def _make_ctx(t, truth, counts, step, truth_step, aux, grid, line_pitch, fit_idx=None):
     v, v_eps = _smoothed_velocity(t, truth, truth_step) if t.size > 1 else (np.zeros(t.size), 0.0)
     vs = np.where(np.abs(v) > v_eps, v, 0.0)
     priv = {
+        "_smooth_correction": _smooth_correction(truth, truth_step),
         "_step": step,
         "_truth_step": truth_step,
         "_truth_var": truth_step**2 / 12.0,
@@ -721,6 +818,7 @@ def select_effects(
     max_tries: int = 3,
     line_pitch: float | None = None,
     stop_at_floor: bool = True,
+    distinguish_bic: float | None = None,
 ) -> SelectionResult:
     """Find, fit and report the effects that explain ``measured`` against ``truth``.
 
@@ -755,6 +853,9 @@ def select_effects(
         After an effect was added, stop as soon as the residual std is within the floor's
         interval (the stop rule of DESIGN 2.3). False tries further candidates anyway (the
         selection then ends only when none passes).
+    distinguish_bic : float or None
+        Margin of the swap-in ``delta_bic`` below which an alternative is reported as not
+        distinguishable from a chosen effect (module notes); None takes ``bic_threshold``.
 
     Returns
     -------
@@ -767,6 +868,9 @@ def select_effects(
         time, or a measured channel not on a grid of ``step``.
     """
     t, truth, measured, step, aux = _check_inputs(t, truth, measured, step, truth_step, aux)
+    margin = float(bic_threshold if distinguish_bic is None else distinguish_bic)
+    if not (math.isfinite(margin) and margin >= 0):
+        raise ValueError(f"distinguish_bic must be a finite number >= 0, got {distinguish_bic!r}")
     if candidates is not None:
         candidates = set(candidates)
         known = {c.name for c in fx.EFFECTS}
@@ -785,12 +889,16 @@ def select_effects(
 
     base_model = _Model([])
     x, ll = _fit(base_model, ctx, _base_start(ctx))
+    base_ll = ll
     # the offset c is only known modulo whole counts from a poor start: refine from the fit
     cur = _Fitted(base_model, x, ll)
     before = residual_stats(cur, full)
     chosen = []  # (effect, delta_bic, heldout, p)
     steps = []
+    step_trials = []  # per step: {candidate name: delta_bic}
+    chosen_trials = []  # the step_trials entry of each chosen effect
     remaining = _candidates(ctx, candidates)
+    all_candidates = list(remaining)
     for _ in range(max_effects):
         st = residual_stats(cur, ctx)
         # The floor check ends the search once effects have brought the residual down to it;
@@ -817,6 +925,7 @@ def select_effects(
             steps.append(record)
             trials.append((dbic, p, cand, e, new, record))
         trials.sort(key=lambda r: -r[0])
+        step_trials.append({r[3].name: r[0] for r in trials})
         picked = None
         for dbic, p, cand, e, new, record in trials[:max_tries]:
             if dbic <= bic_threshold or (np.isfinite(p) and p >= alpha):
@@ -830,15 +939,37 @@ def select_effects(
             break
         dbic, p, cand, e, new, gain = picked
         chosen.append((e, dbic, gain, p))
+        chosen_trials.append(step_trials[-1])
         remaining = [c for c in remaining if c is not cand]
         cur = new
 
+    # Backward check: an effect that entered early may be made redundant by later ones (a
+    # scale mismatch chosen before an angle harmonic whose once-per-turn term also carries the
+    # slope over a short stroke). Every effect must still be worth its parameters in the final
+    # model; the weakest one below the criterion is dropped and the check repeated.
+    kept_bic = {}
+    while len(chosen) > 1:
+        trial = []
+        for j, (e, *_) in enumerate(chosen):
+            reduced = _drop(cur, e, ctx)
+            k = cur.model.n_params() - reduced.model.n_params()
+            trial.append((2.0 * (cur.ll - reduced.ll) - k * math.log(n_fit), j, reduced))
+        d, j, reduced = min(trial, key=lambda r: r[0])
+        kept_bic = {chosen[i][0].name: v for v, i, _ in trial}
+        if d > bic_threshold:
+            break
+        steps.append({"step": "backward", "effect": chosen[j][0].name, "delta_bic": d, "removed": True})
+        del chosen[j], chosen_trials[j]
+        cur = reduced
+        kept_bic = {}
+
     after = residual_stats(cur, full)
+    alternatives = _alternatives(cur, chosen, chosen_trials, all_candidates, ctx, margin)
     se = _intervals(cur, ctx)
     lows = [b[0] for b in cur.model.bounds(ctx)]
     highs = [b[1] for b in cur.model.bounds(ctx)]
     fitted_effects = []
-    for e, dbic, gain, p in chosen:
+    for (e, dbic, gain, p), alts in zip(chosen, alternatives):
         i = cur.model.effects.index(e)
         params = cur.model.params_of(cur.x, i)
         ci = {}
@@ -848,7 +979,13 @@ def select_effects(
         else:
             for name, j in zip(e.param_names, range(sl.start, sl.stop)):
                 ci[name] = (max(cur.x[j] - _Z90 * se[j], lows[j]), min(cur.x[j] + _Z90 * se[j], highs[j]))
-        fitted_effects.append(FittedEffect(e.name, params, ci, dbic, gain, p, e.derived(params)))
+        if e.name in kept_bic:
+            final_bic = kept_bic[e.name]
+        else:  # the only effect left: against the base model
+            k = cur.model.n_params() - base_model.n_params()
+            final_bic = 2.0 * (cur.ll - base_ll) - k * math.log(n_fit)
+        fitted_effects.append(FittedEffect(e.name, params, ci, dbic, gain, p, e.derived(params), alts, margin,
+                                           final_bic))
         # An interval clipped at both ends of the parameter's range (or a non-finite standard
         # error) means the data do not pin the parameter down: typically two selected effects
         # that are collinear over this motion (angle harmonics vs scale over a short stroke).
@@ -857,7 +994,7 @@ def select_effects(
                                        and cur.x[j] + _Z90 * se[j] >= highs[j])
             for j in range(sl.start, sl.stop)))
     explained = after["std"] <= after["floor_ci"][1]
-    message = _message(fitted_effects, explained, before)
+    message = _message(fitted_effects, explained, before, after)
     return SelectionResult(fitted_effects, before, after, bool(explained), message, steps,
                            float(cur.x[0]), float(10.0 ** cur.x[1]), cur, full)
 
@@ -867,16 +1004,38 @@ def _fmt(e: FittedEffect) -> str:
     return f"{e.name} ({main})"
 
 
-def _message(effects, explained, before):
+def _num(x: float) -> str:
+    """One decimal, without the "-0.0" of a tie that the optimiser left a hair below zero."""
+    return f"{x:.1f}".replace("-0.0", "0.0") if x > -0.05 else f"{x:.1f}"
+
+
+def _ratio(stats_):
+    floor = stats_.get("floor_std") or 0.0
+    return stats_["std"] / floor if floor > 0 else float("inf")
+
+
+def _message(effects, explained, before, after=None):
+    """One-sentence verdict: the effects, whether the floor is reached, and every caveat
+    (confounded parameters, alternatives the log cannot tell apart); "unexplained" when a
+    significant residual remains."""
     if not effects:
         if before["std"] <= before["floor_ci"][1]:
             return "the residual matches the exact-model quantization floor; no effect is needed"
-        return "a significant residual remains that no candidate explains"
+        return (f"unexplained: the residual std {before['std']:.3g} rad is {_ratio(before):.3g}x the "
+                "exact-model floor and no candidate effect explains it")
     names = " + ".join(_fmt(e) for e in effects)
     confounded = [e.name for e in effects if e.derived.get("confounded")]
     caveat = (f"; {', '.join(confounded)} not pinned down (interval spans its whole range: "
               "confounded with the other effects over this motion)") if confounded else ""
+    for e in effects:
+        alts = e.indistinguishable
+        if alts:
+            caveat += (f"; {e.name} not distinguishable from "
+                       + " or ".join(f"{a['name']} (swap-in delta BIC {_num(a['delta_bic'])})" for a in alts)
+                       + f" on this log (margin {e.distinguish_bic:g})")
     if explained:
         return f"{names} explains the residual down to the exact-model quantization floor{caveat}"
-    return (f"{names} reduces the residual, but a significant residual remains that no candidate "
-            f"explains{caveat}")
+    if after is None:
+        return f"{names} reduces the residual, but a significant residual remains: unexplained{caveat}"
+    return (f"{names} reduces the residual std from {before['std']:.3g} to {after['std']:.3g} rad, "
+            f"still {_ratio(after):.3g}x the exact-model floor: the rest is unexplained{caveat}")
