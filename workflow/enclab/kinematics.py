@@ -568,11 +568,13 @@ class DHChain(Device):
         return self.frames_from_trig(np.cos(q), np.sin(q))
 
     @staticmethod
-    def jacobian_rows(z: np.ndarray, p: np.ndarray, end: np.ndarray) -> np.ndarray:
+    def jacobian_rows(z: np.ndarray, p: np.ndarray, end: np.ndarray,
+                      out: np.ndarray | None = None) -> np.ndarray:
         """Jacobian ``J[j, i, k] = d out_j / d theta_i`` at sample ``k``, shape ``(3, n, N)``,
-        from the output of :meth:`frames_from_trig`: column ``i`` is ``z_i x (end - p_i)``."""
+        from the output of :meth:`frames_from_trig`: column ``i`` is ``z_i x (end - p_i)``.
+        ``out`` (that shape) receives it when given."""
         d = end[np.newaxis] - p
-        jac = np.empty((3,) + z.shape[:1] + z.shape[2:])
+        jac = np.empty((3,) + z.shape[:1] + z.shape[2:]) if out is None else out
         for j, (k, l) in enumerate(((1, 2), (2, 0), (0, 1))):
             np.multiply(z[:, k], d[:, l], out=jac[j])
             jac[j] -= z[:, l] * d[:, k]
