@@ -298,6 +298,15 @@ def test_atomic_writer_leaves_old_file_on_failure(tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["x.json"]
 
 
+def test_rewriting_an_output_removes_what_a_killed_writer_left(tmp_path):
+    # A SIGKILL mid-write runs no cleanup: its temporary file stays until the output is
+    # written again. Temporary files of other outputs are not touched.
+    (tmp_path / ".x.json.k3j9.tmp.json").write_text("partial")
+    (tmp_path / ".y.json.k3j9.tmp.json").write_text("another output's")
+    io.write_json({"ok": 1}, tmp_path / "x.json")
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".y.json.k3j9.tmp.json", "x.json"]
+
+
 @pytest.mark.parametrize("suffix", [".csv", ".parquet"])
 def test_write_and_read_table(tmp_path, suffix):
     df = pd.DataFrame({"a": [1, 2, 3], "b": [0.5, 1.5, 2.5]})

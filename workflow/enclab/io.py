@@ -12,6 +12,7 @@ into place with :func:`os.replace`, so an interrupted job never leaves a partial
 from __future__ import annotations
 
 import contextlib
+import glob
 import hashlib
 import json
 import math
@@ -749,9 +750,15 @@ def write_canonical_chunks(chunks, meta: dict, path: str | os.PathLike) -> int:
 
 @contextlib.contextmanager
 def _atomic_path(path: str | os.PathLike) -> Iterator[Path]:
-    """Yield a temporary path next to ``path``; move it into place on success, remove on error."""
+    """Yield a temporary path next to ``path``; move it into place on success, remove on error.
+
+    Temporary files of ``path`` left by a writer that was killed (SIGKILL, power cut: no
+    ``except`` ran) are removed first, so rewriting an output also clears its leftovers.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    for stale in path.parent.glob(f".{glob.escape(path.name)}.*.tmp{glob.escape(path.suffix)}"):
+        stale.unlink(missing_ok=True)
     handle, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".tmp{path.suffix}", dir=path.parent)
     os.close(handle)
     tmp = Path(tmp_name)
