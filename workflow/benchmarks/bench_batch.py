@@ -180,17 +180,24 @@ def write_performance_rows(table: pd.DataFrame, path: Path) -> None:
     rows = []
     for _, r in table.iterrows():
         workflow = not r["mode"].startswith("in-process")
+        # A run's own non-stage CPU when it was measured (batched), else the difference to
+        # the in-process run, which on a shared machine can come out below zero.
+        own = r.get("own_cpu_per_log_s")
+        measured = own if workflow and pd.notna(own) else (
+            r["overhead_cpu_per_log_s"] if workflow else r["cpu_per_log_s"])
         rows.append({
             "section": "batch", "case": f"{int(r['n_logs'])} logs x {r['log_s']:g} s, "
                                         f"{r['mode']} (chunk {int(r['chunk_size'])})",
             "stage": "overhead per log" if workflow else "compute", "n_samples": None,
             "n_joints": 3, "reps": 1,
-            "median_s": round(float(r["overhead_cpu_per_log_s"] if workflow
-                                    else r["cpu_per_log_s"]), 4),
+            "median_s": round(float(measured), 4),
             "samples_per_s": None, "ratio_to_read": None, "peak_rss_mb": None,
             "target": "overhead <= 0.5 s CPU per log" if workflow else "",
             "met": ("yes" if r["target_met"] else "no") if workflow else "",
-            "notes": (f"CPU s per log; wall {r['wall_per_log_s']:.3f} s per log, {int(r['jobs'])} "
+            "notes": (("CPU s per log outside the stages (own_cpu_per_log_s); vs the in-process "
+                       f"run {r['overhead_cpu_per_log_s']:.3f} s; " if workflow and pd.notna(own)
+                       else "CPU s per log; ")
+                      + f"wall {r['wall_per_log_s']:.3f} s per log, {int(r['jobs'])} "
                       f"jobs, outputs identical: {r['identical']}, {int(r['cores'])} cores, "
                       f"load {r['loadavg_1min']}")})
     bench_performance.write_section(rows, path)
@@ -302,8 +309,9 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
     table.loc[table["mode"].str.startswith("in-process"),
               ["overhead_cpu_per_log_s", "overhead_wall_per_log_s",
                "overhead_cpu_vs_parallel_per_log_s"]] = np.nan
-    table["target_met"] = [None if np.isnan(v) else bool(v <= 0.5)
-                           for v in table["overhead_cpu_per_log_s"]]
+    table["target_met"] = [None if np.isnan(v) else bool(v <= 0.5 and not own > 0.5)
+                           for v, own in zip(table["overhead_cpu_per_log_s"],
+                                             table["own_cpu_per_log_s"])]
     table["bank"] = args.bank
     table["loadavg_1min"] = ",".join(f"{x:.1f}" for x in load)
     args.out.parent.mkdir(parents=True, exist_ok=True)
