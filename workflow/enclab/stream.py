@@ -579,10 +579,13 @@ def empirical_rows_from_file(path, meta: Mapping, levels: Sequence[Mapping],
     response has decayed below ``1e-20`` of its peak) before the first sample it records.
     The pointwise stages need no warm-up. The batch accumulators of the ranges are merged
     in time order (Chan's update per batch), so the rows equal those of one pass to
-    round-off (``tests/test_stream.py``). ``workers=1`` reads the file in this process.
+    round-off (``tests/test_stream.py``). This process computes the first range itself
+    while ``workers - 1`` spawned processes compute the others (one interpreter and one
+    copy of the imports fewer than a pool of ``workers``); ``workers=1`` starts none.
 
-    ``timings`` receives the seconds per stage summed over the workers; ``worker_peaks_mb``
-    each worker's peak resident memory.
+    ``timings`` receives the seconds per stage summed over the ranges; ``worker_peaks_mb``
+    the peak resident memory of each spawned process (empty with one range: this
+    process's own peak is ``resource.getrusage``'s).
     """
     n_total = int(meta["n_samples"])
     fs = analysis._fs(meta)
@@ -592,23 +595,32 @@ def empirical_rows_from_file(path, meta: Mapping, levels: Sequence[Mapping],
              list(architectures), settle_tol, n_batches, chunk_rows) for lo, hi in ranges]
     if len(jobs) == 1:
         results = [_range_worker(*jobs[0])]
+        spawned = []
     else:
         import concurrent.futures
         import multiprocessing
 
         # spawn, not fork: the parent may hold Arrow's thread pool, which fork does not copy.
         context = multiprocessing.get_context("spawn")
-        with concurrent.futures.ProcessPoolExecutor(len(jobs), mp_context=context) as pool:
-            results = list(pool.map(_range_worker, *zip(*jobs)))
+        with concurrent.futures.ProcessPoolExecutor(len(jobs) - 1, mp_context=context) as pool:
+            futures = [pool.submit(_range_worker, *job) for job in jobs[1:]]
+            try:
+                first = _range_worker(*jobs[0])
+            except BaseException:
+                for future in futures:
+                    future.cancel()
+                raise
+            spawned = [future.result() for future in futures]
+        results = [first, *spawned]
     total, _, _ = results[0]
     for acc, _, _ in results[1:]:
         total.merge(acc)
-    for _, worker_timings, peak in results:
+    for _, range_timings, _ in results:
         if timings is not None:
-            for stage, seconds in worker_timings.items():
+            for stage, seconds in range_timings.items():
                 timings[stage] = timings.get(stage, 0.0) + seconds
-        if worker_peaks_mb is not None:
-            worker_peaks_mb.append(peak)
+    if worker_peaks_mb is not None:
+        worker_peaks_mb.extend(peak for _, _, peak in spawned)
     return total.rows(ci_level)
 
 
@@ -711,12 +723,12 @@ def _moments_command(args) -> int:
     io.write_json({"log_id": meta["log_id"], "rows": rows}, args.out)
     if args.timings:
         own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-        # Workers are separate processes; with more than one, the sum of every process's
-        # own peak bounds the memory in use at any moment (the peaks need not coincide).
-        peak = own if len(peaks) == 1 else own + sum(peaks)
+        # The sum of every process's own peak bounds the memory in use at any moment (the
+        # peaks need not coincide).
+        peak = own + sum(peaks)
         io.write_json({"n_samples": int(meta["n_samples"]), "n_joints": len(levels[0]["joints"]),
                        "n_levels": len(levels), "n_filters": len(bank), "n_rows": len(rows),
-                       "chunk_rows": args.chunk_rows, "workers": len(peaks),
+                       "chunk_rows": args.chunk_rows, "workers": len(peaks) + 1,
                        "stages_s": timings, "stages_note": "seconds summed over workers",
                        "total_s": time.perf_counter() - t0,
                        "peak_rss_mb": peak, "worker_peak_rss_mb": peaks}, args.timings)
