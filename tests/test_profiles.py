@@ -6,7 +6,6 @@ SLURM run (``make test-slurm``) would otherwise show.
 """
 import re
 import subprocess
-from pathlib import Path
 
 import pytest
 import yaml
