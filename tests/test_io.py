@@ -10,6 +10,7 @@ import importlib.util
 import json
 import math
 import os
+import stat
 from pathlib import Path
 
 import matplotlib
@@ -305,6 +306,26 @@ def test_rewriting_an_output_removes_what_a_killed_writer_left(tmp_path):
     (tmp_path / ".y.json.k3j9.tmp.json").write_text("another output's")
     io.write_json({"ok": 1}, tmp_path / "x.json")
     assert sorted(p.name for p in tmp_path.iterdir()) == [".y.json.k3j9.tmp.json", "x.json"]
+
+
+def test_atomic_outputs_get_the_mode_of_a_plain_open(tmp_path):
+    # What a plain open() / mkdir gives under this process's umask, not mkstemp's 0600.
+    mask = os.umask(0o027)
+    try:
+        io._umask.cache_clear()
+        io.write_json({"ok": 1}, tmp_path / "x.json")
+        with io.atomic_folder(tmp_path / "staged") as folder:
+            (folder / "a.txt").write_text("a")
+        with open(tmp_path / "plain.json", "w"):
+            pass
+        (tmp_path / "plain_dir").mkdir()
+    finally:
+        os.umask(mask)
+        io._umask.cache_clear()
+    assert stat.S_IMODE((tmp_path / "x.json").stat().st_mode) == 0o640
+    assert stat.S_IMODE((tmp_path / "plain.json").stat().st_mode) == 0o640
+    assert stat.S_IMODE((tmp_path / "staged").stat().st_mode) == 0o750
+    assert stat.S_IMODE((tmp_path / "plain_dir").stat().st_mode) == 0o750
 
 
 @pytest.mark.parametrize("suffix", [".csv", ".parquet"])

@@ -12,6 +12,7 @@ into place with :func:`os.replace`, so an interrupted job never leaves a partial
 from __future__ import annotations
 
 import contextlib
+import functools
 import glob
 import hashlib
 import json
@@ -748,6 +749,14 @@ def write_canonical_chunks(chunks, meta: dict, path: str | os.PathLike) -> int:
 # --------------------------------------------------------------------------- atomic writers
 
 
+@functools.cache
+def _umask() -> int:
+    # os.umask can only be read by setting it; once per process, before any writer runs.
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
 @contextlib.contextmanager
 def _atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path next to ``path``; move it into place on success, remove on error.
@@ -760,6 +769,9 @@ def _atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     for stale in path.parent.glob(f".{glob.escape(path.name)}.*.tmp{glob.escape(path.suffix)}"):
         stale.unlink(missing_ok=True)
     handle, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".tmp{path.suffix}", dir=path.parent)
+    # mkstemp makes the file private (0600); the output gets the mode a plain open() would
+    # give it, so that a lab's group can read results on a shared file system.
+    os.fchmod(handle, 0o666 & ~_umask())
     os.close(handle)
     tmp = Path(tmp_name)
     try:
@@ -777,6 +789,7 @@ def atomic_folder(path: str | os.PathLike) -> Iterator[Path]:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+    tmp.chmod(0o777 & ~_umask())  # as os.mkdir would make it, not mkdtemp's 0700
     try:
         yield tmp
         os.rename(tmp, path)
