@@ -13,7 +13,8 @@ import yaml
 from workspace import ROOT, SNAKEMAKE
 
 PROFILE = ROOT / "workflow/profiles/slurm/config.yaml"
-# Rules of the chunked mode (chunk_size > 0) span many logs per job by themselves.
+# Rules of the chunked mode (chunk_size > 0): a process_chunk job is many logs by itself and
+# publish_log is a local rule.
 UNGROUPED_PER_LOG = {"process_chunk", "publish_log"}
 
 
@@ -38,7 +39,9 @@ def test_every_per_log_rule_is_in_the_slurm_group():
     assert set(groups) <= rules, f"not per-log rules: {sorted(set(groups) - rules)}"
 
 
-def test_slurm_groups_build_the_embedded_default_dag(tmp_path):
+@pytest.mark.parametrize("extra", [[], ["--config", "chunk_size=10"]], ids=["per-stage", "chunked"])
+def test_slurm_groups_build_the_embedded_default_dag(tmp_path, extra):
+    # chunked: process_chunk jobs stay single SLURM jobs, publish_log runs on the submit host
     if not SNAKEMAKE.exists():
         pytest.fail(f"snakemake is not installed next to {SNAKEMAKE.parent}")
     profile = yaml.safe_load(PROFILE.read_text())
@@ -48,7 +51,7 @@ def test_slurm_groups_build_the_embedded_default_dag(tmp_path):
     components = [f"{g}={n}" for g, n in profile["group-components"].items()]
     done = subprocess.run(
         [str(SNAKEMAKE), "--snakefile", str(ROOT / "Snakefile"), "--cores", "1", "--dry-run",
-         "--quiet", "rules", "--groups", *groups, "--group-components", *components],
+         "--quiet", "rules", "--groups", *groups, "--group-components", *components, *extra],
         cwd=tmp_path, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
     # the DAG holds the residual stage, so the group really spans it
