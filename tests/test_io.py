@@ -316,8 +316,7 @@ def test_atomic_outputs_get_the_mode_of_a_plain_open(tmp_path):
         io.write_json({"ok": 1}, tmp_path / "x.json")
         with io.atomic_folder(tmp_path / "staged") as folder:
             (folder / "a.txt").write_text("a")
-        with open(tmp_path / "plain.json", "w"):
-            pass
+        (tmp_path / "plain.json").write_text("{}")  # a plain open()
         (tmp_path / "plain_dir").mkdir()
     finally:
         os.umask(mask)
