@@ -617,7 +617,6 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
                      + [0.003] * (2 * len(harmonics)))
     if sigma_prior not in ("uniform", "log-uniform"):
         raise ValueError(f"sigma_prior must be 'uniform' or 'log-uniform', got {sigma_prior!r}")
-
     kwargs = {"t": t, "counts": counts, "step": step, "centre_count": centre, "t_ref": t_ref,
               "bounds": bounds, "grid": uniform_grid(t), "sigma_prior": sigma_prior,
               "harmonics": harmonics}
