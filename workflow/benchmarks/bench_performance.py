@@ -37,7 +37,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import os
 import pathlib
@@ -50,6 +49,9 @@ import time
 
 import pandas as pd
 
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from provenance import stamp  # noqa: E402
+
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 OUT_DIR = ROOT / "results" / "benchmarks"
 COLUMNS = ["section", "case", "stage", "n_samples", "n_joints", "reps", "median_s",
@@ -60,8 +62,9 @@ TARGET_RATIO = 4.0
 
 def write_section(rows: list[dict], path: pathlib.Path) -> pd.DataFrame:
     """Add ``rows`` to the CSV at ``path``, replacing the rows of the same (section, case);
-    rows of other sections (other scripts) and other cases are kept."""
-    new = pd.DataFrame(rows, columns=COLUMNS)
+    rows of other sections (other scripts) and other cases are kept. New rows get this run's
+    date, machine and command (:func:`provenance.stamp`)."""
+    new = stamp(pd.DataFrame(rows, columns=COLUMNS))
     if path.exists():
         old = pd.read_csv(path)
         replaced = set(zip(new["section"], new["case"]))
@@ -301,7 +304,6 @@ def main(argv=None) -> int:
         p.error("--reps must be >= 1")
     OUT_DIR.mkdir(parents=True, exist_ok=True)
     load_start = os.getloadavg()
-    started = datetime.datetime.now(datetime.timezone.utc)
     sections = {args.only} if args.only else {"stages", "stream"}
     tag = f"{args.fs_hz:g}hz_seed{args.seed}"
     rows = []
@@ -316,15 +318,14 @@ def main(argv=None) -> int:
             print(f"generated {long} in {gen_s:.1f} s", file=sys.stderr)
         rows += run_stream(long, args)
     load_end = os.getloadavg()
-    stamp = (f"{started:%Y-%m-%d %H:%M} UTC, {os.cpu_count()} CPUs, load avg (1 min) "
-             f"{load_start[0]:.1f} at start, {load_end[0]:.1f} at end")
+    load_note = f"load avg (1 min) {load_start[0]:.1f} at start, {load_end[0]:.1f} at end"
     for row in rows:
-        row["notes"] = f"{row['notes']}; {stamp}" if row["notes"] else stamp
+        row["notes"] = f"{row['notes']}; {load_note}" if row["notes"] else load_note
     table = write_section(rows, args.out)
     with pd.option_context("display.max_columns", None, "display.width", 250,
                            "display.max_colwidth", 60):
         print(table.drop(columns=["notes"]).to_string(index=False))
-    print(f"\nwritten: {args.out}  ({stamp})")
+    print(f"\nwritten: {args.out}  ({load_note})")
     return 0
 
 
