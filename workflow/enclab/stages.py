@@ -8,15 +8,18 @@ same order on the same files, so both modes write byte-identical outputs.
 """
 from __future__ import annotations
 
+import logging
 import os
 from collections.abc import Mapping
 from pathlib import Path
 
 from enclab import analysis, io
+from enclab.errors import EnclabInputError
 from enclab.residuals.pipeline import summary_block as residual_summary_block
 
 __all__ = [
     "QUANTIZATION_OUTPUTS",
+    "check_cutoffs",
     "ingest",
     "requantize",
     "kinematics",
@@ -41,10 +44,29 @@ QUANTIZATION_OUTPUTS = {
 PathLike = str | os.PathLike
 
 
+_LOG = logging.getLogger("enclab.stages")
+
+
 def ingest(entry: Mapping, data_root: PathLike, devices: Mapping, canonical: PathLike) -> None:
-    """One manifest entry -> the canonical Parquet log."""
+    """One manifest entry -> the canonical Parquet log (its warnings are logged too)."""
     df, meta = io.ingest_log(entry, data_root, devices)
+    for line in meta.get("warnings") or []:
+        _LOG.warning("[%s] %s", meta["log_id"], line)
     io.write_canonical(df, meta, canonical)
+
+
+def check_cutoffs(settings: Mapping, meta: Mapping) -> None:
+    """:func:`enclab.analysis.check_cutoffs`; when the log's time base is implausible, the
+    error names that fix instead (a cutoff above Nyquist is then its symptom)."""
+    try:
+        analysis.check_cutoffs(settings, meta)
+    except EnclabInputError as err:
+        time_base = [w for w in meta.get("warnings") or [] if w.startswith("time base:")]
+        if not time_base:
+            raise
+        fix = time_base[0][len("time base: "):]
+        raise EnclabInputError(err.file, err.problem, key=err.key, expected=err.expected,
+                               hint=fix[0].upper() + fix[1:]) from None
 
 
 def requantize(canonical: PathLike, settings: Mapping, requantized: PathLike) -> None:
@@ -67,7 +89,7 @@ def kinematics(requantized: PathLike, out: PathLike) -> None:
 def derivatives(requantized: PathLike, settings: Mapping, export: list, out: PathLike) -> None:
     """The exported derivative estimators (``settings``: ``config["derivatives"]``)."""
     req, meta = io.read_canonical(requantized)
-    analysis.check_cutoffs(settings, meta)
+    check_cutoffs(settings, meta)
     io.write_canonical(analysis.export_derivatives(req, meta, meta["levels"], export), meta, out)
 
 
@@ -76,7 +98,7 @@ def moments(requantized: PathLike, kinematics_path: PathLike, settings: Mapping,
     """Empirical error moments over the whole derivative-filter bank."""
     req, meta = io.read_canonical(requantized)
     kin, _ = io.read_canonical(kinematics_path)
-    analysis.check_cutoffs(settings, meta)
+    check_cutoffs(settings, meta)
     rows = analysis.empirical_rows(
         req, kin, meta, meta["levels"], analysis.filter_bank(settings),
         settings["architectures"], settle_tol=settings["settle_tol"],
@@ -89,7 +111,7 @@ def theory(requantized: PathLike, kinematics_path: PathLike, settings: Mapping,
     """Table II, the exact model and the trajectory worst case for every row."""
     req, meta = io.read_canonical(requantized)
     kin, _ = io.read_canonical(kinematics_path)
-    analysis.check_cutoffs(settings, meta)
+    check_cutoffs(settings, meta)
     rows = analysis.theory_rows(req, kin, meta, meta["levels"], analysis.filter_bank(settings),
                                 settings["architectures"], settle_tol=settings["settle_tol"])
     io.write_json({"log_id": meta["log_id"], "rows": rows}, out)
@@ -112,6 +134,7 @@ def summary(inputs: Mapping[str, PathLike], out: PathLike) -> None:
     else:
         _, meta = io.read_canonical(inputs["canonical"])
         block = analysis.log_header(meta)
+    block["warnings"] = list(meta.get("warnings") or [])
     if "lrde" in inputs:
         block["lrde"] = io.read_json(inputs["lrde"])
     if "residuals" in inputs:
