@@ -98,6 +98,14 @@ def test_run_logs_wall_and_cpu_time_or_one_error_line(tmp_path, root_logging):
     lines = (tmp_path / "bad.log").read_text().strip().splitlines()
     assert len(lines) == 1 and lines[0].endswith("ERROR [a] cutoff 600 Hz is at or above Nyquist")
 
+    def bug(s):
+        raise KeyError("channels")
+    with pytest.raises(KeyError):
+        runner.run(smk("bug.log"), bug)
+    # a bug's last line comes first (the progress display shows it), then its traceback
+    lines = (tmp_path / "bug.log").read_text().splitlines()
+    assert lines[0].endswith("ERROR [a] KeyError: 'channels'") and "Traceback" in lines[1]
+
 
 def test_quantization_outputs_match_the_rules():
     # publish_log (workflow/rules/chunks.smk) declares these files: keep the two lists equal.

@@ -61,7 +61,9 @@ __all__ = [
     "read_manifest",
     "read_raw",
     "read_table",
+    "read_texts",
     "save_figure",
+    "save_thumbnail",
     "write_canonical",
     "write_canonical_chunks",
     "write_json",
@@ -926,6 +928,16 @@ def read_json(path: str | os.PathLike) -> Any:
         return json.load(handle)
 
 
+def read_texts(folder: str | os.PathLike, pattern: str = "*") -> dict[str, str]:
+    """``{file name: text}`` of the files in ``folder`` matching ``pattern`` (none: ``{}``);
+    bytes that are not UTF-8 are replaced (these are logs to show, not data to parse)."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        return {}
+    return {p.name: p.read_text(encoding="utf-8", errors="replace")
+            for p in sorted(folder.glob(pattern)) if p.is_file()}
+
+
 def write_parquet(df: pd.DataFrame, path: str | os.PathLike, metadata: dict | None = None) -> None:
     """Write a DataFrame to Parquet atomically, with ``metadata`` as JSON under key ``b"enclab"``."""
     table = pa.Table.from_pandas(df, preserve_index=False)
@@ -957,6 +969,27 @@ def read_table(path: str | os.PathLike) -> pd.DataFrame:
     if suffix == ".csv":
         return pd.read_csv(path)
     raise ValueError(f"path must end in .csv or .parquet, got {str(path)!r}")
+
+
+def save_thumbnail(source: str | os.PathLike, path: str | os.PathLike, max_width: int = 480,
+                   colors: int = 64) -> None:
+    """A small copy of a PNG figure for the HTML report, written atomically.
+
+    Scaled to at most ``max_width`` pixels wide (aspect kept, Lanczos) and reduced to a palette
+    of ``colors`` colours: a tenth of the full figure's bytes, the same for the same input.
+    """
+    from PIL import Image
+
+    if max_width < 16 or not 2 <= colors <= 256:
+        raise ValueError(f"max_width must be >= 16 and colors in 2..256, got {max_width}, {colors}")
+    with Image.open(source) as image:
+        image = image.convert("RGB")
+    if image.width > max_width:
+        height = max(1, round(image.height * max_width / image.width))
+        image = image.resize((max_width, height), Image.LANCZOS)
+    image = image.quantize(colors=colors)
+    with _atomic_path(path) as tmp:
+        image.save(tmp, format="PNG", optimize=True)
 
 
 # Date stamps that would make figure files differ between identical runs.

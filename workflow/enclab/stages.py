@@ -18,6 +18,7 @@ from enclab.errors import EnclabInputError
 from enclab.residuals.pipeline import summary_block as residual_summary_block
 
 __all__ = [
+    "FIGURE_OUTPUTS",
     "QUANTIZATION_OUTPUTS",
     "check_cutoffs",
     "ingest",
@@ -27,9 +28,16 @@ __all__ = [
     "moments",
     "theory",
     "summary",
+    "log_figures",
     "quantization_log",
 ]
 
+# Output name -> file name under results/<log_id>/ of the per-log figures (rule log_figures),
+# which the chunked mode draws for the logs that show them.
+FIGURE_OUTPUTS = {
+    "errors": "figures/errors.png",
+    "comparison": "figures/comparison.png",
+}
 # Output name -> file name under results/<log_id>/ of the paper-000 stages, in stage order.
 QUANTIZATION_OUTPUTS = {
     "canonical": "canonical.parquet",
@@ -146,13 +154,39 @@ def summary(inputs: Mapping[str, PathLike], out: PathLike) -> None:
     io.write_json(block, out)
 
 
+def log_figures(inputs: Mapping[str, PathLike], export: list, settle_tol: float,
+                errors: PathLike, comparison: PathLike) -> None:
+    """The per-log figures: error traces and the theory-vs-measured comparison.
+
+    ``inputs`` holds ``requantized``, ``kinematics``, ``derivatives`` and ``summary``;
+    ``export`` and ``settle_tol`` are ``config["derivatives"]`` keys.
+    """
+    from enclab import plots  # matplotlib: only jobs that draw import it
+
+    req, meta = io.read_canonical(inputs["requantized"])
+    kin, _ = io.read_canonical(inputs["kinematics"])
+    deriv, _ = io.read_canonical(inputs["derivatives"])
+    summary_block = io.read_json(inputs["summary"])
+    level = meta["levels"][0]["label"]
+    tr = analysis.error_traces(req, kin, deriv, meta, level, export, settle_tol)
+    title = f"{meta['log_id']}: {tr['signal']} error at {level}"
+    io.save_figure(plots.error_trace_figure(tr["t"], tr["errors"], title, tr["unit"],
+                                            step=tr["step"]), errors)
+    table = analysis.summary_table(summary_block)
+    truth = analysis.truth_channels(meta)[0]
+    native = truth.get("step") or truth.get("native_step")
+    fig = plots.real_log_figure(table, f"{meta['log_id']}: measured vs theory",
+                                native_step=native, step_unit=truth["unit"])
+    io.save_figure(fig, comparison)
+
+
 def quantization_log(entry: Mapping, folder: PathLike, config: Mapping,
-                     data_root: PathLike) -> None:
+                     data_root: PathLike, figures: bool = False) -> None:
     """Every paper-000 stage of one log, ``ingest`` to ``summary``, into ``folder``.
 
     The same calls, in the same order, as the per-stage rules of
     ``workflow/rules/{ingest,quantization}.smk``; ``folder`` receives the files of
-    :data:`QUANTIZATION_OUTPUTS`.
+    :data:`QUANTIZATION_OUTPUTS`, and with ``figures`` those of :data:`FIGURE_OUTPUTS`.
 
     Parameters
     ----------
@@ -164,6 +198,8 @@ def quantization_log(entry: Mapping, folder: PathLike, config: Mapping,
         The workflow configuration (``devices``, ``requantize``, ``derivatives``, ``moments``).
     data_root : path-like
         The manifest's data root.
+    figures : bool
+        Also draw the per-log figures (rule ``log_figures``).
     """
     folder = Path(folder)
     out = {name: folder / file for name, file in QUANTIZATION_OUTPUTS.items()}
@@ -176,3 +212,6 @@ def quantization_log(entry: Mapping, folder: PathLike, config: Mapping,
     theory(out["requantized"], out["kinematics"], d, out["theory"])
     summary({k: out[k] for k in ("canonical", "requantized", "moments", "theory")},
             out["summary"])
+    if figures:
+        log_figures(out, d["export"], d["settle_tol"], folder / FIGURE_OUTPUTS["errors"],
+                    folder / FIGURE_OUTPUTS["comparison"])

@@ -92,6 +92,14 @@ def _first_of_groups(ids):
 
 
 FIGURE_IDS = _first_of_groups(QUANT_IDS)
+# The HTML report (snakemake --report) opens on the run summary once rule run_summary wrote it.
+REPORT_PAGE = "results/report/summary.rst"
+report: os.path.abspath(REPORT_PAGE) if os.path.exists(REPORT_PAGE) else "../report/workflow.rst"
+# The chunked logs whose figures their chunk draws: as FIGURE_IDS, but over every log of the
+# manifest (like the chunks themselves), so that the second pass finds the chunks complete.
+CHUNK_FIGURE_IDS = [i for i in _first_of_groups([i for i in sorted(ENTRIES)
+                                                  if "quantization" in _stages(ENTRIES[i])])
+                    if i in CHUNK_OF]
 CODE_DIGEST = enclab.code_digest()
 
 
@@ -187,4 +195,7 @@ def all_targets():
                     for p in pairs for name in ("diagnostics.png", "before_after.png")]
     if RESIDUAL_IDS:
         targets += ["results/batch/residuals.csv"]
+    # batch.smk: the run summary and the report's thumbnails
+    targets += ["results/summary.json"]
+    targets += [f"results/report/thumbs/{kind}" for kind in report_figures()]
     return targets
