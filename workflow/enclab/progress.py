@@ -82,6 +82,7 @@ class ProgressHandler(LogHandlerBase):
 
     def __post_init__(self) -> None:
         self.jobs: dict[int, tuple[str, dict, list, float]] = {}
+        self.failures: set[tuple[str, str]] = set()
         self.done = 0
         self.total = 0
         # Inherited by the job processes this Snakemake starts (local execution).
@@ -147,6 +148,11 @@ class ProgressHandler(LogHandlerBase):
             wildcards = self.jobs.pop(int(record.jobid), (rule, {}, [], None))[1]
             logs = list(record.log or [])
             message = error_line_of(_read_logs(logs)) or "no message"
+            # a chunked log that fails fails its publish jobs alike: one line for it
+            key = ("/".join(map(str, wildcards.values())), message)
+            if key in self.failures:
+                return
+            self.failures.add(key)
             where = f" (log: {logs[0]})" if logs else ""
             self._print(f"{self._counter()}  FAILED {job_label(rule, wildcards).rstrip()}: "
                         f"{message}{where}")

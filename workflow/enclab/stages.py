@@ -8,12 +8,14 @@ same order on the same files, so both modes write byte-identical outputs.
 """
 from __future__ import annotations
 
+import functools
 import logging
 import os
 from collections.abc import Mapping
 from pathlib import Path
 
 from enclab import analysis, io
+from enclab import filters as flt
 from enclab.errors import EnclabInputError
 from enclab.residuals.pipeline import summary_block as residual_summary_block
 
@@ -63,8 +65,18 @@ def ingest(entry: Mapping, data_root: PathLike, devices: Mapping, canonical: Pat
     io.write_canonical(df, meta, canonical)
 
 
+@functools.lru_cache(maxsize=64)
+def _filter_memory(fs: float, bank: tuple) -> int:
+    """Samples of the longest impulse response of a bank, as the theory stage computes them
+    (the same for every log sampled at ``fs``: computed once per process)."""
+    filters = analysis.filter_bank({"bank": dict(bank)})
+    return max(flt.impulse_response(f, fs, tol=analysis._IMPULSE_TOL).size for f in filters)
+
+
 def check_cutoffs(settings: Mapping, meta: Mapping) -> None:
-    """:func:`enclab.analysis.check_cutoffs`; when the log's time base is implausible, the
+    """The log suits the derivative filters: :func:`enclab.analysis.check_cutoffs`, and longer
+    than the longest filter memory (the theory stage's own check, made before the moments stage
+    too, so that every stage names the same fix). When the log's time base is implausible, the
     error names that fix instead (a cutoff above Nyquist is then its symptom)."""
     try:
         analysis.check_cutoffs(settings, meta)
@@ -75,6 +87,14 @@ def check_cutoffs(settings: Mapping, meta: Mapping) -> None:
         fix = time_base[0][len("time base: "):]
         raise EnclabInputError(err.file, err.problem, key=err.key, expected=err.expected,
                                hint=fix[0].upper() + fix[1:]) from None
+    bank = tuple((k, tuple(v)) for k, v in sorted(settings["bank"].items()))
+    memory = _filter_memory(float(meta["fs_hz"]), bank)
+    if int(meta["n_samples"]) < memory:
+        raise EnclabInputError(
+            "configuration", f"log '{meta.get('log_id')}' has {int(meta['n_samples'])} samples, "
+            f"fewer than the longest derivative filter's memory ({memory} samples)",
+            key="derivatives.bank.fc_hz", expected="a log longer than every filter's memory",
+            hint="Use higher cutoffs, or leave the log out.")
 
 
 def requantize(canonical: PathLike, settings: Mapping, requantized: PathLike) -> None:

@@ -17,6 +17,8 @@ rule lrde_fit:
         settings=lambda wc: lrde_settings(wc),
         code=CODE_DIGEST,
     threads: 1
+    # the longest job of a run: started first (the greedy scheduler prefers larger inputs)
+    priority: 1
     log:
         "results/{log_id}/logs/lrde_fit.log",
     benchmark:
