@@ -61,6 +61,17 @@ def test_lrde_entry_with_counts_step_truth_and_rate():
     assert entry["analysis"] == {"stages": ["lrde"]}
 
 
+def test_sample_index_time_needs_the_rate():
+    args = _args("residuals", "x.csv", "--truth", "a", "--measured", "b", "--time", "k",
+                 "--time-unit", "samples", "--rate", "500")
+    entry = _validated(cli.build_entry("residuals", args))
+    assert entry["time"] == {"column": "k", "unit": "samples", "rate_hz": 500.0,
+                             "nominal_rate_hz": None}
+    with pytest.raises(ValueError, match="--rate"):
+        cli.build_entry("residuals", _args("residuals", "x.csv", "--truth", "a", "--measured",
+                                           "b", "--time-unit", "samples"))
+
+
 def test_unknown_suffix_asks_for_the_format_and_options_are_required():
     with pytest.raises(ValueError, match="--format"):
         cli.build_entry("lrde", _args("lrde", "log.xyz", "--counts", "c", "--step", "1e-3"))

@@ -79,7 +79,11 @@ def build_entry(command: str, args: argparse.Namespace) -> dict:
     fmt = _format_of(path, args.format)
     entry = {"id": args.id or _log_id(path), "file": path.name, "format": fmt,
              "device": {"kind": "single_joint"}}
-    if args.rate is not None:
+    if args.time_unit == "samples":  # a sample-index column: the rate gives the seconds
+        if args.rate is None:
+            raise ValueError("--time-unit samples needs --rate (the sample rate in Hz)")
+        entry["time"] = {"column": args.time, "unit": "samples", "rate_hz": args.rate}
+    elif args.rate is not None:
         entry["time"] = {"rate_hz": args.rate}
     else:
         entry["time"] = {"column": args.time, "unit": args.time_unit}
@@ -192,7 +196,7 @@ def _common(parser: argparse.ArgumentParser) -> None:
     time.add_argument("--time-unit", default="s", choices=["s", "ms", "us", "samples"],
                       help="unit of the time column (default: s)")
     time.add_argument("--rate", type=float, metavar="HZ",
-                      help="sample rate instead of a time column")
+                      help="sample rate: instead of a time column, or with --time-unit samples")
     read = parser.add_argument_group("reading the file (manifest keys format and reader.*)")
     read.add_argument("--format", choices=sorted(set(_FORMATS.values())),
                       help="default: from the file name")
