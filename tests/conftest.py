@@ -2,7 +2,7 @@
 
 Quick tests run first and the ``slow`` ones (workflow runs, long Monte Carlo) after them, so
 that a broken unit shows within seconds. The standard workspace (tests/workspace.py) runs once
-per session in the default mode and once with one job per stage and log; the workflow tests
+per pytest session in the default mode and once with one job per stage and log; the workflow tests
 read these runs (they must not change them).
 """
 from __future__ import annotations

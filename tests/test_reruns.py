@@ -2,7 +2,7 @@
 results of an uninterrupted run; so two runs of one configuration are byte-identical (every
 output of the killed workspace is computed again, by other processes, before or after the kill).
 
-The uninterrupted run is the session's default run of the standard workspace (conftest.py);
+The uninterrupted run is the test session's default run of the standard workspace (conftest.py);
 this one builds the same workspace afresh (same seeds, same bytes), kills it once published
 outputs exist and jobs are running, unlocks and reruns the two passes of ``make run``.
 """

@@ -5,7 +5,7 @@ sampler settings), a log with a NaN in the middle and one too short for the filt
 logs fail alone with a message naming the file, the column and the row, leave no outputs,
 every other log completes, and the second pass of ``make run`` (``batch_scope=completed``)
 builds the batch tables, the run summary and the report without them. The runs are the
-session's (conftest.py), in the default mode and with one job per stage.
+test session's (conftest.py), in the default mode and with one job per stage.
 """
 import json
 import re

@@ -1,7 +1,7 @@
 """Tiny workflow workspaces for the end-to-end tests.
 
 The *standard* workspace (:func:`standard_workspace`) is shared: ``conftest.py`` runs it once
-per test session in the default mode and once with one job per stage, and test_workflow.py,
+per pytest session in the default mode and once with one job per stage, and test_workflow.py,
 test_chunks.py and test_reruns.py read those runs instead of starting their own.
 """
 from __future__ import annotations
