@@ -105,7 +105,8 @@ def _record(msg=None, level=logging.INFO, **extra):
 
 
 def test_progress_prints_one_line_per_job_and_failure(tmp_path, monkeypatch):
-    monkeypatch.delenv(progress.QUIET_JOBS_ENV, raising=False)
+    # the handler sets the variable for the jobs it starts: restored after this test
+    monkeypatch.setenv(progress.QUIET_JOBS_ENV, "")
     log = tmp_path / "ingest.log"
     log.write_text("2026 enclab.ingest ERROR [bad] bad.csv: line 3: NaN value.\n")
     out = stdio.StringIO()
@@ -134,7 +135,7 @@ def test_progress_prints_one_line_per_job_and_failure(tmp_path, monkeypatch):
     assert lines[3:] == ["Nothing to be done (all requested files are present and up to date).",
                          "batch_scope=completed: leaving out 1 log(s)"]
     # while the handler is active, jobs keep their messages to their log files
-    assert progress.QUIET_JOBS_ENV in __import__("os").environ
+    assert __import__("os").environ[progress.QUIET_JOBS_ENV] == "1"
 
 
 def test_error_line_of_falls_back_to_the_last_line():
