@@ -30,20 +30,38 @@ $(SLURM_STAMP): $(STAMP)
 	$(BIN)/python -m pip install --quiet -c constraints.txt -e '.[test,slurm]'
 	@touch $@
 
-# A log that fails (bad input) stops only itself: --keep-going finishes the others, then a second
-# pass builds the batch tables, figures and report from the logs that completed, and make exits
-# non-zero so the failure is not missed (each failed log's reason: results/<log_id>/logs/).
+# The terminal shows one line per finished job and one per failure (--logger enclab, see
+# workflow/enclab/progress.py; Snakemake's full log: .snakemake/log/). A log that fails (bad
+# input) stops only itself: --keep-going (in the profile) finishes the others, then a second
+# pass builds the batch tables, figures, run summary and report from the logs that completed,
+# and make exits non-zero so the failure is not missed. The run summary (what ran, the headline
+# numbers, what failed and why: results/summary.txt) closes the output.
+SMK := $(BIN)/snakemake $(PROFILE) --logger enclab
+REPORT := $(SMK) --cores 1 --report results/report.html \
+	--report-metadata results/report/metadata.yaml --report-stylesheet workflow/report/report.css
+
 run: $(STAMP)
 	@echo "==> running the workflow on the embedded default (config.yaml, $(CORES) cores)"
-	@if $(BIN)/snakemake $(PROFILE) --cores $(CORES) --printshellcmds --keep-going $(if $(CONFIG),--config $(CONFIG)) $(SMK_ARGS); then \
-		$(BIN)/snakemake $(PROFILE) --cores 1 --report results/report.html $(if $(CONFIG),--config $(CONFIG)) $(SMK_ARGS) && \
-		echo "==> done: results/ (summaries, batch tables, figures) and results/report.html"; \
+	@status=0; scope=all; \
+	if $(SMK) --cores $(CORES) --config batch_scope=all $(CONFIG) $(SMK_ARGS); then \
+		done=1; \
 	else \
-		echo "==> some logs failed (messages above); batch tables and report from the rest"; \
-		$(BIN)/snakemake $(PROFILE) --cores $(CORES) --keep-going --config batch_scope=completed $(CONFIG) $(SMK_ARGS) && \
-		$(BIN)/snakemake $(PROFILE) --cores 1 --report results/report.html --config batch_scope=completed $(CONFIG) $(SMK_ARGS); \
-		exit 1; \
-	fi
+		echo "==> some logs failed (above); batch tables, summary and report from the rest"; \
+		status=1; scope=completed; done=0; \
+		$(SMK) --cores $(CORES) --config batch_scope=completed $(CONFIG) $(SMK_ARGS) && done=1; \
+	fi; \
+	if [ $$done = 1 ]; then \
+		$(REPORT) --config batch_scope=$$scope $(CONFIG) $(SMK_ARGS) || status=1; \
+		if [ -f results/summary.txt ]; then echo "==> run summary (results/summary.txt)"; cat results/summary.txt; fi; \
+		if [ -f results/report.html ]; then echo "==> report: results/report.html ($$(du -h results/report.html | cut -f1))"; fi; \
+	else \
+		echo "==> the batch pass failed too (above): no run summary, no report"; \
+	fi; \
+	exit $$status
+
+# The HTML report of the last run (make run builds it too).
+report: $(STAMP)
+	$(REPORT) $(if $(CONFIG),--config $(CONFIG)) $(SMK_ARGS)
 
 test: $(STAMP)
 	@echo "==> running the test suite"

@@ -1,8 +1,8 @@
 """Rule process_chunk: every paper-000 stage of several logs in one job (config chunk_size).
 
-Each log's outputs land in results/.chunks/<chunk>/<log_id>/ only if all its stages succeed;
-a failing log is recorded with its error line and the others go on (rule publish_log then
-fails for that log alone)."""
+Each log's outputs land in results/.chunks/<chunk>/<log_id>/ only if all its stages succeed
+(with the per-log figures for the logs that show them); a failing log is recorded with its
+error line and the others go on (rule publish_log then fails for that log alone)."""
 import logging
 
 from enclab import stages
@@ -13,8 +13,10 @@ def main(smk):
     p = smk.params
     config = {"devices": p.devices, "requantize": p.requantize, "derivatives": p.derivatives,
               "moments": p.moments}
+    figures = set(p.figures)
     status = run_chunk(
-        p.entries, lambda entry, folder: stages.quantization_log(entry, folder, config, p.data_root),
+        p.entries, lambda entry, folder: stages.quantization_log(
+            entry, folder, config, p.data_root, figures=entry["id"] in figures),
         smk.output.staging)
     failed = sorted(log_id for log_id, line in status.items() if line is not None)
     logging.getLogger("enclab.process_chunk").info(

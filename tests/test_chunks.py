@@ -1,17 +1,16 @@
-"""Chunked mode (config chunk_size > 0): several logs per job, same contract as one job per stage.
+"""Chunked mode (config chunk_size > 0, the default): several logs per job, same contract as
+one job per stage.
 
-The unit tests drive :func:`enclab.runner.run_chunk` directly. The end-to-end test puts two
-good logs, a log with a NaN (fails at ingest) and a log too short for the filters (fails after
-ingest, in the moments/theory stages) in one chunk, next to a paper-002 log that keeps its own
-rules, and runs the two passes of ``make run``: the bad logs fail alone with their one error
-line and leave no output, and every other output is byte-identical to a run with one job per
-stage and log.
+The unit tests drive :func:`enclab.runner.run_chunk` directly. The end-to-end tests read the
+test session's runs of the standard workspace (conftest.py): two good logs, a log with a NaN (fails
+at ingest) and a log too short for the filters (fails after ingest, in the moments/theory
+stages) in one chunk, next to a paper-002 log that keeps its own rules, through the two passes
+of ``make run``: the bad logs fail alone with their one error line and leave no output, and
+every other output is byte-identical to a run with one job per stage and log.
 """
+import json
 import logging
-import os
 import re
-import subprocess
-import sys
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -20,9 +19,8 @@ import pytest
 
 from enclab import io, runner, stages
 from enclab.errors import EnclabInputError
-from enclab.lrde import simulate as lrde_sim
 from enclab.simulate import phantom_protocol_run
-from workspace import (SNAKEMAKE, lrde_entry, phantom_entry, result_digests, snakemake_command,
+from workspace import (copy_workspace, phantom_entry, result_digests, run_workflow,
                        write_workspace)
 
 
@@ -98,68 +96,51 @@ def test_run_logs_wall_and_cpu_time_or_one_error_line(tmp_path, root_logging):
     lines = (tmp_path / "bad.log").read_text().strip().splitlines()
     assert len(lines) == 1 and lines[0].endswith("ERROR [a] cutoff 600 Hz is at or above Nyquist")
 
+    def bug(s):
+        raise KeyError("channels")
+    with pytest.raises(KeyError):
+        runner.run(smk("bug.log"), bug)
+    # a bug's last line comes first (the progress display shows it), then its traceback
+    lines = (tmp_path / "bug.log").read_text().splitlines()
+    assert lines[0].endswith("ERROR [a] KeyError: 'channels'") and "Traceback" in lines[1]
+
 
 def test_quantization_outputs_match_the_rules():
-    # publish_log (workflow/rules/chunks.smk) declares these files: keep the two lists equal.
+    # publish_log and publish_figures (workflow/rules/chunks.smk) declare these files: keep
+    # the lists equal.
     text = (Path(__file__).resolve().parents[1] / "workflow/rules/chunks.smk").read_text()
-    for name, file in stages.QUANTIZATION_OUTPUTS.items():
+    for name, file in {**stages.QUANTIZATION_OUTPUTS, **stages.FIGURE_OUTPUTS}.items():
         assert f'{name}="results/{{log_id}}/{file}"' in text
 
 
+BANK = {"bank": {"d": [1], "n": [1, 2], "fc_hz": [50], "discretization": ["exponential"]},
+        "export": []}
+
+
+def test_check_cutoffs_names_the_time_base_fix_and_the_filter_memory():
+    meta = {"log_id": "x", "fs_hz": 1000.0, "n_samples": 5000, "warnings": []}
+    stages.check_cutoffs(BANK, meta)  # a 5 s log at 1 kHz suits a 50 Hz filter
+    with pytest.raises(EnclabInputError, match=r"log 'x' has 20 samples, fewer than the longest "
+                       r"derivative filter's memory \(\d+ samples\).*higher cutoffs"):
+        stages.check_cutoffs(BANK, {**meta, "n_samples": 20})
+    warning = ("time base: sampled at 1 Hz (median step 1 s), implausibly slow for a moving "
+               "encoder (below 10 Hz): is the time column 't' in ms? (set time.unit: ms)")
+    with pytest.raises(EnclabInputError) as info:
+        stages.check_cutoffs(BANK, {**meta, "fs_hz": 1.0, "warnings": [warning]})
+    text = str(info.value)
+    assert "Nyquist" in text and text.endswith("is the time column 't' in ms? (set time.unit: ms).")
+    assert "\n" not in text
+
+
 # ----------------------------------------------------------------------------- end to end
-
-def _workspace(work):
-    data = work / "logs"
-    data.mkdir(parents=True)
-    entries = []
-    for k in (1, 2):
-        log, _ = phantom_protocol_run(np.zeros(3), np.random.default_rng(k), duration_s=3.0)
-        io.write_table(log, data / f"good{k}.parquet")
-        entries.append(phantom_entry(f"good{k}", f"good{k}.parquet", "g"))
-    bad = log.astype({"theta2_counts": float})
-    bad.loc[1234, "theta2_counts"] = np.nan
-    bad.to_csv(data / "bad.csv", index=False)
-    entries.append(phantom_entry("bad", "bad.csv", "g") | {"format": "csv"})
-    short, _ = phantom_protocol_run(np.zeros(3), np.random.default_rng(4), duration_s=0.04)
-    io.write_table(short, data / "short.parquet")
-    entries.append(phantom_entry("short", "short.parquet", "g"))
-    step = lrde_sim.ROS_DRILL_STEP
-    lrde_log, _ = lrde_sim.open_loop_log(np.random.default_rng(5), n_cycles=6,
-                                         noise_std=0.01 * step, truth_step=step / 100)
-    io.write_table(lrde_log, data / "lrde.parquet")
-    entries.append(lrde_entry("lrde", "lrde.parquet"))
-    write_workspace(work, entries, fig7_group="g")
-    return work
-
-
-def _run(work, *extra):
-    return subprocess.run(snakemake_command(work, "--keep-going", *extra), cwd=work,
-                          capture_output=True, text=True, timeout=900,
-                          env=dict(os.environ, MPLBACKEND="Agg"))
-
-
-@pytest.fixture(scope="module")
-def two_modes(tmp_path_factory):
-    if not SNAKEMAKE.exists():
-        pytest.fail(f"snakemake is not installed next to {sys.executable}")
-    runs = {}
-    for mode, size in (("chunked", 10), ("per_rule", 0)):
-        work = _workspace(tmp_path_factory.mktemp(mode))
-        raw_before = {p.name: p.read_bytes() for p in (work / "logs").iterdir()}
-        config = ("--config", f"chunk_size={size}")
-        first = _run(work, *config)
-        second = _run(work, *config, "batch_scope=completed")
-        if size == 0:
-            # The chunked mode writes derivatives.parquet for every log, the per-stage mode
-            # only for logs with figures: build good2's here too, to compare it.
-            assert _run(work, *config, "--", "results/good2/derivatives.parquet").returncode == 0
-        runs[mode] = (work, first, second, raw_before)
-    return runs
+# The test session's runs of the standard workspace (conftest.py): good1, good2, bad (NaN, fails at
+# ingest) and short (fails after ingest, in the moments/theory stages) share one chunk; the
+# paper-002 log keeps its own rules.
 
 
 @pytest.mark.slow
-def test_bad_logs_fail_alone_with_their_line_and_no_output(two_modes):
-    work, first, second, raw_before = two_modes["chunked"]
+def test_bad_logs_fail_alone_with_their_line_and_no_output(default_run):
+    work, first, second = default_run.work, default_run.first, default_run.second
     assert first.returncode != 0, "the bad logs must make the first pass fail"
     assert second.returncode == 0, second.stderr[-3000:]
     assert "leaving out 2 log(s) without a summary" in second.stderr
@@ -173,30 +154,41 @@ def test_bad_logs_fail_alone_with_their_line_and_no_output(two_modes):
         outputs = [p.name for p in (work / "results" / failed).iterdir()
                    if p.name not in ("logs", "benchmarks")]
         assert outputs == [], f"{failed} left {outputs}"
-    assert {p.name: p.read_bytes() for p in (work / "logs").iterdir()} == raw_before
+    assert {p.name: p.read_bytes() for p in (work / "logs").iterdir()} == default_run.raw_before
 
 
 @pytest.mark.slow
-def test_chunked_outputs_are_byte_identical_to_one_job_per_stage(two_modes):
-    chunked = result_digests(two_modes["chunked"][0])
-    per_rule = result_digests(two_modes["per_rule"][0])
+def test_chunked_outputs_are_byte_identical_to_one_job_per_stage(default_run, per_rule_run):
+    chunked = default_run.digests()
+    per_rule = per_rule_run.digests()
     # The per-stage mode keeps the outputs of the stages of 'short' that succeeded (ingest
-    # ...); the chunked mode publishes a log whole or not at all. The rest is file for file.
+    # ...); the chunked mode publishes a log whole or not at all. The rest is file for file,
+    # figures included (the chunk drew bad's figures in vain; good1's come from log_figures in
+    # both modes: bad, its group's first log, failed).
     extra = set(per_rule) - set(chunked)
     assert extra and all(name.startswith("short/") for name in extra), extra
     assert set(chunked) <= set(per_rule)
     differ = sorted(k for k in chunked if chunked[k] != per_rule[k])
-    assert not differ, f"outputs differ between the modes: {differ}"
+    assert differ == ["summary.json"], f"outputs differ between the modes: {differ}"
+    # The run summary names the stage where each failed log stopped: its rule's log, which in
+    # the chunked mode is the whole chain's (quantization). Everything else is equal.
+    runs = [json.loads((r.work / "results/summary.json").read_text())
+            for r in (default_run, per_rule_run)]
+    stages = [{f["log_id"]: f.pop("stage") for f in run["failed"]} for run in runs]
+    assert stages[0] == {"bad": "quantization", "short": "quantization"}
+    assert stages[1]["bad"] == "ingest" and stages[1]["short"] in ("moments", "theory")
+    assert runs[0] == runs[1]
     for name in ("good1/summary.json", "good2/summary.json", "lrde/summary.json",
-                 "batch/quantization.csv", "batch/lrde.csv", "good1/figures/errors.png"):
+                 "batch/quantization.csv", "batch/lrde.csv", "good1/figures/errors.png",
+                 "summary.json", "report/thumbs/log_errors/good1.png"):
         assert name in chunked
 
 
 @pytest.mark.slow
-def test_chunked_rerun_has_nothing_to_do(two_modes):
-    work = two_modes["chunked"][0]
-    before = result_digests(work)
-    again = _run(work, "--config", "chunk_size=10", "batch_scope=completed")
+def test_chunked_rerun_has_nothing_to_do(default_run):
+    work = default_run.work
+    before = default_run.digests()
+    again = run_workflow(work, "--config", "batch_scope=completed")
     assert again.returncode == 0, again.stderr[-3000:]
     assert "Nothing to be done" in again.stderr + again.stdout
     assert result_digests(work) == before
@@ -204,8 +196,15 @@ def test_chunked_rerun_has_nothing_to_do(two_modes):
 
 # ------------------------------------------------------- staleness and publishing, chunked
 
-def _small_chunked(work):
-    """Three good logs in two chunks (chunk_size=2: good1 + good2, then good3), run once."""
+_SMALL_TARGETS = ("--config", "chunk_size=2", "--",
+                  *(f"results/good{k}/summary.json" for k in (1, 2, 3)))
+
+
+@pytest.fixture(scope="module")
+def small_chunked(tmp_path_factory):
+    """Three good logs in two chunks (chunk_size=2: good1 + good2, then good3), run once; each
+    test gets a copy."""
+    work = tmp_path_factory.mktemp("small_chunked")
     data = work / "logs"
     data.mkdir(parents=True)
     entries = []
@@ -214,24 +213,20 @@ def _small_chunked(work):
         io.write_table(log, data / f"good{k}.parquet")
         entries.append(phantom_entry(f"good{k}", f"good{k}.parquet", "g"))
     write_workspace(work, entries, fig7_group="g")
-    first = _run(work, *_SMALL_TARGETS)
+    first = run_workflow(work, *_SMALL_TARGETS)
     assert first.returncode == 0, first.stderr[-3000:]
     return work
 
 
-_SMALL_TARGETS = ("--config", "chunk_size=2", "--",
-                  *(f"results/good{k}/summary.json" for k in (1, 2, 3)))
-
-
 @pytest.mark.slow
-def test_chunked_changed_log_reruns_its_chunk_only(tmp_path):
-    work = _small_chunked(tmp_path)
+def test_chunked_changed_log_reruns_its_chunk_only(small_chunked, tmp_path):
+    work = copy_workspace(small_chunked, tmp_path / "w")
     summaries = {k: work / f"results/good{k}/summary.json" for k in (1, 2, 3)}
     before = {k: (p.stat().st_ino, p.stat().st_mtime_ns, p.read_bytes())
               for k, p in summaries.items()}
     log, _ = phantom_protocol_run(np.full(3, 0.1), np.random.default_rng(7), duration_s=2.0)
     io.write_table(log, work / "logs/good3.parquet")
-    again = _run(work, *_SMALL_TARGETS)
+    again = run_workflow(work, *_SMALL_TARGETS)
     assert again.returncode == 0, again.stderr[-3000:]
     # Snakemake finds the changed input: good3's chunk and publish job run, the other chunk
     # and its logs' published files are left as they were.
@@ -243,12 +238,13 @@ def test_chunked_changed_log_reruns_its_chunk_only(tmp_path):
 
 
 @pytest.mark.slow
-def test_chunked_publish_that_fails_midway_leaves_no_output(tmp_path):
-    work = _small_chunked(tmp_path)
+def test_chunked_publish_that_fails_midway_leaves_no_output(small_chunked, tmp_path):
+    work = copy_workspace(small_chunked, tmp_path / "w")
     # A staged file gone: publish_log links the others, then fails on this one; Snakemake
     # must remove what it linked (publish_log writes no temporary names of its own).
     (work / "results/.chunks/chunk0000/good1/theory.json").unlink()
-    broken = _run(work, "--force", *_SMALL_TARGETS[:2], "--", "results/good1/summary.json")
+    broken = run_workflow(work, "--force", *_SMALL_TARGETS[:2], "--",
+                          "results/good1/summary.json")
     assert broken.returncode != 0
     assert "publish_log" in broken.stderr
     left = sorted(p.name for p in (work / "results/good1").iterdir()

@@ -3,7 +3,9 @@
 Every bad log fails alone with its one-line error (file, column, row or key, what was
 expected) and leaves no output of the failing stage; broken manifests and configurations stop
 before any job runs; good-but-odd logs (repeated or missing time stamps, a wrapping counter)
-complete with the irregularity reported; and no input file changes.
+complete with the irregularity reported; files as labs have them (another encoding,
+semicolons and decimal commas, gzip, a time column in ms) are read when declared, or fail with
+one line naming the key to set; and no input file changes.
 """
 import sys
 from pathlib import Path
@@ -36,6 +38,10 @@ def test_case_gets_its_expected_outcome(corpus, case):
         assert outcome.completed, f"{case.name} should complete: {outcome.message}"
         for key, value in case.extra.get("report", {}).items():
             assert outcome.report[key] == value
+        if "warning" in case.extra:
+            assert any(case.extra["warning"] in w for w in outcome.warnings), outcome.warnings
+        else:
+            assert outcome.warnings == []
     else:
         assert not outcome.completed
         assert outcome.leftovers == []

@@ -22,7 +22,7 @@ COUNTS = np.asarray(fixtures.COUNTS)
 N = COUNTS.size
 DEVICES = {"axis": {"kind": "single_joint"}, "rail": {"kind": "single_joint", "unit": "m"}}
 META_KEYS = {"log_id", "source", "fs_hz", "n_samples", "device", "group", "tags", "time_report", "channels",
-             "analysis"}
+             "analysis", "warnings"}
 REPORT_KEYS = {"fs_hz", "median_dt_s", "n_samples", "n_repeated", "n_backwards", "n_gaps", "max_gap_s",
                "jitter_rms_s", "trailing_empty_dropped", "nominal_rate_hz"}
 
@@ -204,6 +204,31 @@ def test_sample_index_time_and_rate_only_time():
     df, meta = convert({"a": np.zeros(4)}, time_spec={"rate_hz": 250}, a={})
     np.testing.assert_array_equal(df["t"], np.arange(4) / 250)
     assert meta["fs_hz"] == 250.0 and meta["time_report"]["n_gaps"] == 0
+
+
+@pytest.mark.parametrize(("unit", "fix"), [("s", "in ms? (set time.unit: ms)"),
+                                         ("ms", "in us? (set time.unit: us)")])
+def test_a_moving_encoder_below_10_hz_gets_a_time_base_warning(unit, fix):
+    # 1 kHz stamps written in ms (or us) but declared one unit coarser: a 1 Hz "log" of a
+    # moving joint. It is read (the numbers may be right) and the warning names the fix.
+    stamps = np.arange(50) * (1.0 if unit == "s" else 1000.0)
+    moving = {"theta": np.sin(np.arange(50) / 5.0)}
+    _, meta = convert(moving, time=stamps, time_spec={"column": "t", "unit": unit},
+                      theta={"role": "truth", "joint": 1})
+    (line,) = meta["warnings"]
+    assert line.startswith("time base: sampled at 1 Hz") and line.endswith(f"column 't' {fix}")
+    # the same log at 1 kHz, or a slow log of an aux channel only, is not warned about
+    _, meta = convert(moving, time=stamps / 1000.0, time_spec={"column": "t", "unit": unit},
+                      theta={"role": "truth", "joint": 1})
+    assert meta["warnings"] == []
+    _, meta = convert(moving, time=stamps, time_spec={"column": "t", "unit": unit}, theta={})
+    assert meta["warnings"] == []
+
+
+def test_time_base_warning_of_a_rate_only_log_names_rate_hz():
+    _, meta = convert({"theta": np.sin(np.arange(20.0))}, time_spec={"rate_hz": 2},
+                      theta={"role": "truth", "joint": 1})
+    assert meta["warnings"][0].endswith("check time.rate_hz")
 
 
 def test_crop_keeps_the_closed_interval():

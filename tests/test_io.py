@@ -278,6 +278,98 @@ def test_last_comment_with_wrong_name_count(tmp_path):
     assert (err.row, err.row_label) == (2, "line") and "names 2 columns" in str(err)
 
 
+# ----------------------------------------------------------------------------- file forms
+# The same numbers written as labs' loggers write them: each form is read to the same values,
+# or, when the entry does not declare it, fails with one line that names the key to set.
+
+FORM_TEXT = "t,q,r\n0,1.5,2\n0.001,-2.25,3\n0.002,3,4e-3\n"
+FORM_VALUES = {"q": [1.5, -2.25, 3.0], "r": [2.0, 3.0, 4e-3]}
+
+
+def read_form(tmp_path, name, data: bytes, **reader):
+    (tmp_path / name).write_bytes(data)
+    raw = read(tmp_path, file=name, format="csv", time={"column": "t"},
+               channels=[aux("q", "q"), aux("r", "r")], **({"reader": reader} if reader else {}))
+    return {k: v.tolist() for k, v in raw.channels.items()}, raw.time.tolist()
+
+
+def test_latin1_header_needs_reader_encoding(tmp_path):
+    # A Windows logger's header "angle [°]" in Latin-1: the degree sign is the single byte 0xb0.
+    data = FORM_TEXT.replace("q", "q [\u00b0]", 1).encode("latin-1")
+    (tmp_path / "w.csv").write_bytes(data)
+    err = input_error(tmp_path, file="w.csv", format="csv", time={"column": "t"},
+                      channels=[aux("q", "q [\u00b0]")])
+    assert (err.row, err.row_label) == (1, "line")
+    assert "not a UTF-8 text file (byte 0xb0" in str(err) and "reader.encoding" in str(err)
+    assert "latin-1" in str(err) and "\n" not in str(err)
+    raw = read(tmp_path, file="w.csv", format="csv", time={"column": "t"},
+               reader={"encoding": "latin-1"}, channels=[aux("q", "q [\u00b0]")])
+    assert raw.channels["q"].tolist() == FORM_VALUES["q"] and raw.columns["q"] == "q [\u00b0]"
+
+
+def test_utf8_with_byte_order_mark_and_utf16_hint(tmp_path):
+    values, _ = read_form(tmp_path, "bom.csv", b"\xef\xbb\xbf" + FORM_TEXT.encode())
+    assert values == FORM_VALUES
+    (tmp_path / "u16.csv").write_bytes(FORM_TEXT.encode("utf-16"))
+    err = input_error(tmp_path, file="u16.csv", format="csv", channels=[aux("q", "q")])
+    assert "reader.encoding: utf-16" in str(err)
+    values, _ = read_form(tmp_path, "u16.csv", FORM_TEXT.encode("utf-16"), encoding="utf-16")
+    assert values == FORM_VALUES
+
+
+def test_semicolons_with_decimal_commas_are_read_when_declared(tmp_path):
+    text = FORM_TEXT.replace(",", ";").replace(".", ",")
+    values, t = read_form(tmp_path, "de.csv", text.encode(), delimiter=";", decimal=",")
+    assert values == FORM_VALUES and t == [0.0, 0.001, 0.002]
+    # auto finds the semicolons itself; the decimal comma must be declared
+    values, _ = read_form(tmp_path, "de.csv", text.encode(), decimal=",")
+    assert values == FORM_VALUES
+
+
+def test_decimal_commas_not_declared_name_reader_decimal(tmp_path):
+    text = FORM_TEXT.replace(",", ";").replace(".", ",")
+    (tmp_path / "de.csv").write_text(text)
+    err = input_error(tmp_path, file="de.csv", format="csv", time={"column": "t"},
+                      channels=[aux("q", "q")])
+    assert (err.column, err.row) == ("q", 2) and "text '1,5'" in str(err)
+    assert "decimal commas: set reader.decimal: ','" in str(err)
+
+
+def test_semicolons_read_as_commas_name_reader_delimiter(tmp_path):
+    (tmp_path / "sc.csv").write_text(FORM_TEXT.replace(",", ";"))
+    err = input_error(tmp_path, file="sc.csv", format="csv", reader={"delimiter": ","},
+                      channels=[aux("q", "q")])
+    assert "column not found" in str(err) and "set reader.delimiter: ';'" in str(err)
+    values, _ = read_form(tmp_path, "sc.csv", FORM_TEXT.replace(",", ";").encode())  # auto
+    assert values == FORM_VALUES
+
+
+def test_gzip_files_are_read_transparently(tmp_path):
+    import gzip
+
+    values, t = read_form(tmp_path, "z.csv.gz", gzip.compress(FORM_TEXT.encode()))
+    assert values == FORM_VALUES and t == [0.0, 0.001, 0.002]
+    table = pd.DataFrame({"q": FORM_VALUES["q"]})
+    table.to_parquet(tmp_path / "p.parquet", index=False)
+    (tmp_path / "p.parquet.gz").write_bytes(gzip.compress((tmp_path / "p.parquet").read_bytes()))
+    raw = read(tmp_path, file="p.parquet.gz", format="parquet", channels=[aux("q", "q")])
+    assert raw.channels["q"].tolist() == FORM_VALUES["q"]
+    scipy.io.savemat(tmp_path / "m.mat", {"q": np.array(FORM_VALUES["q"])})
+    (tmp_path / "m.mat.gz").write_bytes(gzip.compress((tmp_path / "m.mat").read_bytes()))
+    raw = read(tmp_path, file="m.mat.gz", format="mat", channels=[aux("q", "q")])
+    assert raw.channels["q"].tolist() == FORM_VALUES["q"]
+
+
+def test_truncated_gzip_names_the_file_and_the_fix(tmp_path):
+    import gzip
+
+    data = gzip.compress((FORM_TEXT * 50).encode())
+    (tmp_path / "cut.csv.gz").write_bytes(data[: len(data) // 2])
+    err = input_error(tmp_path, file="cut.csv.gz", format="csv", channels=[aux("q", "q")])
+    assert err.file == str(tmp_path / "cut.csv.gz")
+    assert "not a complete gzip file" in str(err) and "copy it again" in str(err)
+
+
 # ----------------------------------------------------------------------------- writers
 
 

@@ -47,8 +47,8 @@ def test_defaults_are_filled_for_a_minimal_csv_entry():
     data_root, (entry,) = validate(log())
     assert data_root == "."
     assert entry["time"] == {"column": "t", "unit": "s", "nominal_rate_hz": None}
-    assert entry["reader"] == {"delimiter": "auto", "comment": None, "header": 0, "column_names": None,
-                               "skip_trailing_empty": True}
+    assert entry["reader"] == {"delimiter": "auto", "decimal": ".", "encoding": "utf-8", "comment": None,
+                               "header": 0, "column_names": None, "skip_trailing_empty": True}
     assert entry["analysis"] == {} and entry["tags"] == [] and entry["crop"] is None
     assert entry["device"] is None and entry["group"] is None and entry["description"] is None
     channel = entry["channels"][0]
@@ -214,3 +214,14 @@ def test_read_manifest_schema_error_names_the_file(tmp_path: Path):
     with pytest.raises(EnclabInputError) as info:
         io.read_manifest(path, DEVICES)
     assert str(info.value).startswith(f"{path}: key 'logs'")
+
+
+def test_reader_encoding_and_decimal_are_checked():
+    err = error_of(log(reader={"encoding": "latin-9x"}))
+    assert err.key == "logs[0].reader.encoding" and "unknown encoding" in str(err)
+    err = error_of(log(reader={"delimiter": ",", "decimal": ","}))
+    assert err.key == "logs[0].reader.decimal"
+    _, (entry,) = validate(log(reader={"delimiter": ";", "decimal": ",", "encoding": "cp1252"}))
+    assert entry["reader"]["decimal"] == "," and entry["reader"]["encoding"] == "cp1252"
+    err = error_of(log(format="parquet", file="x.parquet", reader={"encoding": "latin-1"}))
+    assert err.key == "logs[0].reader.encoding" and "does not apply" in str(err)

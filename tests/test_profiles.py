@@ -13,9 +13,9 @@ import yaml
 from workspace import ROOT, SNAKEMAKE
 
 PROFILE = ROOT / "workflow/profiles/slurm/config.yaml"
-# Rules of the chunked mode (chunk_size > 0): a process_chunk job is many logs by itself and
-# publish_log is a local rule.
-UNGROUPED_PER_LOG = {"process_chunk", "publish_log"}
+# Rules of the chunked mode (chunk_size > 0, the default): a process_chunk job is many logs by
+# itself and the publish rules are local.
+UNGROUPED_PER_LOG = {"process_chunk", "publish_log", "publish_figures"}
 
 
 def per_log_rules() -> set[str]:
@@ -39,7 +39,7 @@ def test_every_per_log_rule_is_in_the_slurm_group():
     assert set(groups) <= rules, f"not per-log rules: {sorted(set(groups) - rules)}"
 
 
-@pytest.mark.parametrize("extra", [[], ["--config", "chunk_size=10"]], ids=["per-stage", "chunked"])
+@pytest.mark.parametrize("extra", [["--config", "chunk_size=0"], []], ids=["per-stage", "chunked"])
 def test_slurm_groups_build_the_embedded_default_dag(tmp_path, extra):
     # chunked: process_chunk jobs stay single SLURM jobs, publish_log runs on the submit host
     if not SNAKEMAKE.exists():

@@ -1,13 +1,25 @@
-"""Tiny workflow workspaces for the end-to-end tests (test_workflow.py, test_reruns.py)."""
+"""Tiny workflow workspaces for the end-to-end tests.
+
+The *standard* workspace (:func:`standard_workspace`) is shared: ``conftest.py`` runs it once
+per pytest session in the default mode and once with one job per stage, and test_workflow.py,
+test_chunks.py and test_reruns.py read those runs instead of starting their own.
+"""
 from __future__ import annotations
 
 import hashlib
+import os
+import shutil
+import subprocess
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import yaml
 
+from enclab import io
 from enclab.lrde import simulate as lrde_sim
+from enclab.simulate import phantom_protocol_run
 
 ROOT = Path(__file__).resolve().parents[1]
 # Images carry no timestamps (save_figure strips them) but are compared only for existence:
@@ -68,3 +80,69 @@ def result_digests(work: Path) -> dict[str, str]:
             for p in sorted(results.rglob("*"))
             if p.is_file() and not {"logs", "benchmarks", ".chunks"} & set(p.parts)
             and p.name != "report.html"}
+
+
+def standard_workspace(work: Path) -> tuple[Path, dict]:
+    """good1, good2: 3 s simulated Phantom runs (repeat group ``g``, Fig. 7 group); bad: the
+    same run as CSV with a NaN at table row 1234 (fails at ingest); short: 40 ms, too short for
+    the derivative filters (fails after ingest); lrde: an 8-cycle paper-002 log, bias 0.1 step,
+    with a step/100 truth channel. Returns the folder and the lrde log's true parameters."""
+    data = work / "logs"
+    data.mkdir(parents=True)
+    entries = []
+    for k in (1, 2):
+        log, _ = phantom_protocol_run(np.zeros(3), np.random.default_rng(k), duration_s=3.0)
+        io.write_table(log, data / f"good{k}.parquet")
+        entries.append(phantom_entry(f"good{k}", f"good{k}.parquet", "g"))
+    bad = log.astype({"theta2_counts": float})
+    bad.loc[1234, "theta2_counts"] = np.nan
+    bad.to_csv(data / "bad.csv", index=False)
+    entries.append(phantom_entry("bad", "bad.csv", "g") | {"format": "csv"})
+    short, _ = phantom_protocol_run(np.zeros(3), np.random.default_rng(4), duration_s=0.04)
+    io.write_table(short, data / "short.parquet")
+    entries.append(phantom_entry("short", "short.parquet", "g"))
+    step = lrde_sim.ROS_DRILL_STEP
+    lrde_log, lrde_params = lrde_sim.open_loop_log(np.random.default_rng(5), bias=0.1 * step,
+                                                   n_cycles=8, noise_std=0.01 * step,
+                                                   truth_step=step / 100)
+    io.write_table(lrde_log, data / "lrde.parquet")
+    entries.append(lrde_entry("lrde", "lrde.parquet"))
+    write_workspace(work, entries, fig7_group="g")
+    return work, lrde_params
+
+
+def run_workflow(work: Path, *extra: str, timeout: int = 900) -> subprocess.CompletedProcess:
+    """One Snakemake run in ``work`` with ``--keep-going`` (output captured)."""
+    return subprocess.run(snakemake_command(work, "--keep-going", *extra), cwd=work,
+                          capture_output=True, text=True, timeout=timeout,
+                          env=dict(os.environ, MPLBACKEND="Agg"))
+
+
+@dataclass
+class Run:
+    """The two passes of `make run` in a workspace: everything, then the batch over the logs
+    that completed (``batch_scope=completed``)."""
+
+    work: Path
+    first: subprocess.CompletedProcess
+    second: subprocess.CompletedProcess
+    raw_before: dict
+    lrde_params: dict
+
+    def digests(self) -> dict[str, str]:
+        return result_digests(self.work)
+
+
+def run_two_passes(work: Path, lrde_params: dict, *config: str, flags: tuple = ()) -> Run:
+    """The two passes with ``--config *config`` (and Snakemake ``flags``)."""
+    raw_before = {p.name: p.read_bytes() for p in (work / "logs").iterdir()}
+    first = run_workflow(work, *flags, *(("--config", *config) if config else ()))
+    second = run_workflow(work, *flags, "--config", *config, "batch_scope=completed")
+    return Run(work, first, second, raw_before, lrde_params)
+
+
+def copy_workspace(source: Path, target: Path) -> Path:
+    """A copy of a workspace that has run, with Snakemake's records and every mtime, so that
+    Snakemake sees it as complete."""
+    shutil.copytree(source, target, symlinks=True, copy_function=shutil.copy2)
+    return target

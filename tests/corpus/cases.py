@@ -48,8 +48,8 @@ class Case:
     build: Callable[[Path, str], dict]
     expect: list[str] | None
     scope: str = "log"  # "log": one manifest entry; "manifest"/"config": a broken document
-    stage: str | None = None  # rule whose log holds the error; None: ingest for logs, else
-    #                           rejected before any job runs
+    stage: str | None = None  # where the error is raised (a per-log config case runs its
+    #                           log; None: at ingest for logs, else before any job runs)
     extra: dict = field(default_factory=dict)
 
     @property
@@ -148,6 +148,61 @@ def _gap(lines):
     return lines[:500] + lines[520:]
 
 
+def _bytes_case(make: Callable[[pd.DataFrame], bytes], suffix: str = ".csv", entry_mut=None):
+    """A good table written as bytes (another encoding, separators, compression)."""
+    def build(root: Path, log_id: str) -> dict:
+        path = root / f"{log_id}{suffix}"
+        path.write_bytes(make(good_table()))
+        entry = good_entry(log_id, path.name)
+        if entry_mut:
+            entry_mut(entry)
+        return entry
+    return build
+
+
+def _csv_text(table: pd.DataFrame) -> str:
+    return table.to_csv(index=False, float_format="%.10g")
+
+
+def _latin1_header(table: pd.DataFrame) -> bytes:
+    # A Windows logger's header: "angle [°]" in Latin-1, the degree sign one byte 0xb0.
+    return _csv_text(table.rename(columns={"angle": "angle [\u00b0]"})).encode("latin-1")
+
+
+def _german_locale(table: pd.DataFrame) -> bytes:
+    # Excel or a logger under a German locale: fields separated by ';', decimal commas.
+    return table.to_csv(index=False, sep=";", decimal=",", float_format="%.10g").encode()
+
+
+def _gzipped(table: pd.DataFrame) -> bytes:
+    import gzip
+
+    return gzip.compress(_csv_text(table).encode(), mtime=0)
+
+
+def _gzip_cut(table: pd.DataFrame) -> bytes:
+    data = _gzipped(table)
+    return data[: len(data) // 2]
+
+
+def _ms_as_seconds(table: pd.DataFrame) -> pd.DataFrame:
+    return table.assign(t=table["t"] * 1000.0)  # a 1 kHz log in ms, declared in s
+
+
+def _pair_in_ms(root: Path, log_id: str) -> dict:
+    """A truth/measured pair (the residual stage alone) whose time column is in ms."""
+    t = np.arange(N) / FS
+    truth = 0.05 * np.sin(2 * np.pi * 5.0 * t)
+    measured = np.floor(truth / (4 * STEP) + 0.5) * 4 * STEP
+    path = root / f"{log_id}.csv"
+    pd.DataFrame({"t": t * 1000.0, "truth": truth, "measured": measured}).to_csv(
+        path, index=False, float_format="%.17g")
+    return {"id": log_id, "file": path.name, "format": "csv", "device": "lrde_axis",
+            "time": {"column": "t", "unit": "s"},
+            "channels": [{"name": "truth", "column": "truth", "role": "truth", "joint": 1},
+                         {"name": "measured", "column": "measured", "role": "measured", "joint": 1}]}
+
+
 def _deg_as_rad(table):
     return table.assign(angle=np.rad2deg(table["angle"]) * 20)
 
@@ -196,11 +251,37 @@ CASES: list[Case] = [
     Case("mat_without_variable", "a .mat file without the named variable", _mat_case,
          ["mat_without_variable.mat", "'angle'", "position"]),
     Case("too_short_for_filters", "40 samples: shorter than the slowest derivative filter",
-         _csv_case(lambda t: t.iloc[:40]), ["too_short_for_filters", "samples"], stage="theory"),
+         _csv_case(lambda t: t.iloc[:40]), ["too_short_for_filters", "40 samples",
+                                            "filter's memory", "higher cutoffs"],
+         stage="quantization"),
     Case("missing_file", "the entry's file does not exist",
          _csv_case(lambda t: t, _with(file="no_such_log.csv")), ["no_such_log.csv", "not found"]),
     Case("never_moves", "a joint that never moves", _csv_case(_never_moves),
          ["never_moves.csv", "'angle'", "never moves"]),
+    # files as labs have them: each form is read when declared, or names the key to set
+    Case("latin1_header", "a Latin-1 degree sign in the header (a Windows logger)",
+         _bytes_case(_latin1_header, entry_mut=_with(**{"channels.0.column": "angle [\u00b0]"})),
+         ["latin1_header.csv", "line 1", "not a UTF-8 text file", "reader.encoding", "latin-1"]),
+    Case("latin1_header_declared", "the same file with reader.encoding: latin-1",
+         _bytes_case(_latin1_header, entry_mut=_with(**{"channels.0.column": "angle [\u00b0]",
+                                                        "reader": {"encoding": "latin-1"}})), None),
+    Case("decimal_comma", "semicolons and decimal commas (a German locale), not declared",
+         _bytes_case(_german_locale), ["decimal_comma.csv", "'angle'",
+                                       "decimal commas: set reader.decimal: ','"]),
+    Case("decimal_comma_declared", "the same file with reader.decimal: ','",
+         _bytes_case(_german_locale, entry_mut=_with(reader={"decimal": ","})), None),
+    Case("gzipped_csv", "a gzip-compressed CSV (run1.csv.gz)", _bytes_case(_gzipped, ".csv.gz"),
+         None),
+    Case("truncated_gzip", "a gzip file cut in half", _bytes_case(_gzip_cut, ".csv.gz"),
+         ["truncated_gzip.csv.gz", "not a complete gzip file", "copy it again"]),
+    Case("time_in_ms_as_seconds", "a 1 kHz log whose time column is in ms, declared s",
+         _csv_case(_ms_as_seconds, _with(**{"time.nominal_rate_hz": None})),
+         ["time_in_ms_as_seconds", "Nyquist", "1 Hz",
+                                     "is the time column 't' in ms? (set time.unit: ms)"],
+         stage="quantization"),
+    Case("pair_time_in_ms", "a truth/measured pair with its time column in ms (completes, "
+         "warned)", _pair_in_ms, None,
+         extra={"warning": "is the time column 't' in ms? (set time.unit: ms)"}),
 ]
 
 
@@ -262,5 +343,5 @@ CASES += [
     Case("config_cutoff_above_nyquist", "a 600 Hz cutoff for 1 kHz logs",
          _config_case({"derivatives.bank.fc_hz": [50, 600]}),
          ["derivatives.bank.fc_hz", "600 Hz", "Nyquist", "config_cutoff_above_nyquist"],
-         scope="config", stage="moments"),
+         scope="config", stage="quantization"),
 ]

@@ -27,11 +27,13 @@ from enclab.manifest import channel_axis, detect_grid_enabled
 __all__ = [
     "GRID_TOLERANCE",
     "RATE_TOLERANCE",
+    "SLOW_RATE_HZ",
     "TIME_UNITS",
     "UNIT_FACTORS",
     "canonicalize",
     "detect_grid",
     "off_grid",
+    "time_base_warnings",
     "time_report",
     "unwrap_counter",
 ]
@@ -42,6 +44,9 @@ TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
 GRID_TOLERANCE = 0.01  # values must sit on a grid within 1 % of a step (schema: native_step)
 RATE_TOLERANCE = 0.05  # median step vs nominal_rate_hz (schema: nominal_rate_hz)
 GAP_FACTOR = 1.5  # a time step longer than this many median steps is a gap (missed samples)
+# Below this rate a log of a moving encoder is far more often a time column in ms (or a wrong
+# rate) than a real recording: a warning in summary.json, not an error.
+SLOW_RATE_HZ = 10.0
 
 
 def unwrap_counter(counts: np.ndarray, wrap_bits: int) -> np.ndarray:
@@ -171,6 +176,44 @@ def time_report(t: np.ndarray, nominal_rate_hz: float | None = None, *,
     }
 
 
+_FINER_UNIT = {"s": "ms", "ms": "us"}
+
+
+def time_base_warnings(report: dict, time_spec: dict) -> list[str]:
+    """Warnings about a time base that is implausible for a moving encoder.
+
+    A log whose median rate is below :data:`SLOW_RATE_HZ` is far more often a time column in
+    ms declared as s (1 kHz read as 1 Hz) than a real recording; the warning names the key
+    that would fix it. Call it only for logs with a truth or measured channel that moves.
+
+    Parameters
+    ----------
+    report : dict
+        :func:`time_report` of the log.
+    time_spec : dict
+        The entry's normalised ``time`` block.
+
+    Returns
+    -------
+    list of str
+        One line per warning (empty when the time base is plausible).
+    """
+    fs = float(report["fs_hz"])
+    if not fs < SLOW_RATE_HZ:
+        return []
+    unit = time_spec.get("unit")
+    if "column" in time_spec or "file" in time_spec:
+        source = f"time column '{time_spec['column']}'" if "column" in time_spec else "time file"
+        if unit in _FINER_UNIT:
+            fix = f"is the {source} in {_FINER_UNIT[unit]}? (set time.unit: {_FINER_UNIT[unit]})"
+        else:
+            fix = "check time.rate_hz and time.unit"
+    else:
+        fix = "check time.rate_hz"
+    return [f"time base: sampled at {fs:.3g} Hz (median step {report['median_dt_s']:.3g} s), "
+            f"implausibly slow for a moving encoder (below {SLOW_RATE_HZ:g} Hz): {fix}"]
+
+
 def _time_base(raw, entry: dict) -> tuple[np.ndarray, float | None]:
     spec = entry["time"]
     if "column" not in spec and "file" not in spec:
@@ -285,7 +328,8 @@ def canonicalize(raw, entry: dict, devices: dict) -> tuple[pd.DataFrame, dict]:
         ``log_id``, ``source`` {file, sha256 (None; set by :func:`enclab.io.ingest_log`),
         format}, ``fs_hz``, ``n_samples``, ``device``, ``group``, ``tags``, ``time_report``
         (see :func:`time_report`), ``channels`` [{name, role, joint, unit, storage, step,
-        native_step}], ``analysis``.
+        native_step}], ``analysis``, ``warnings`` (lines about odd but usable input, e.g.
+        :func:`time_base_warnings`; summary.json carries them).
 
     Raises
     ------
@@ -346,6 +390,8 @@ def canonicalize(raw, entry: dict, devices: dict) -> tuple[pd.DataFrame, dict]:
         columns[channel["name"]] = stored
         channel_meta.append(meta)
     df = pd.DataFrame(columns)
+    moving = any(c["role"] in ("truth", "measured") for c in entry["channels"])
+    warnings = time_base_warnings(report, spec) if moving else []
 
     device = entry.get("device")
     if isinstance(device, str):
@@ -366,5 +412,6 @@ def canonicalize(raw, entry: dict, devices: dict) -> tuple[pd.DataFrame, dict]:
         "time_report": report,
         "channels": channel_meta,
         "analysis": copy.deepcopy(entry.get("analysis") or {}),
+        "warnings": warnings,
     }
     return df, meta

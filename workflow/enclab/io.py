@@ -6,20 +6,32 @@ one-value-per-line file), so that every :class:`~enclab.errors.EnclabInputError`
 exact place. The conversions to SI, the time base and the checks on it are pure functions
 in :mod:`enclab.ingest`.
 
+Files come as labs have them: any of the formats may be gzip-compressed (read transparently,
+recognised by their first bytes), text files may be in another encoding than UTF-8
+(``reader.encoding``, e.g. ``latin-1`` for a degree sign written by a Windows logger), and
+semicolon-separated files with decimal commas are read when declared (``reader.delimiter: ";"``,
+``reader.decimal: ","``). When a file does not match what the entry declares, the error says
+which key to set.
+
 Every writer is atomic: it writes a temporary file in the target's directory and moves it
 into place with :func:`os.replace`, so an interrupted job never leaves a partial output.
 """
 from __future__ import annotations
 
+import codecs
 import contextlib
 import functools
 import glob
+import gzip
 import hashlib
+import io as _stdio
 import json
 import math
 import os
+import re
 import shutil
 import tempfile
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator
@@ -42,12 +54,16 @@ __all__ = [
     "file_sha256",
     "ingest_log",
     "iter_canonical",
+    "is_gzip",
+    "read_bytes",
     "read_canonical",
     "read_json",
     "read_manifest",
     "read_raw",
     "read_table",
+    "read_texts",
     "save_figure",
+    "save_thumbnail",
     "write_canonical",
     "write_canonical_chunks",
     "write_json",
@@ -277,7 +293,7 @@ def read_raw(entry: dict, data_root: str | os.PathLike) -> RawLog:
     if raw.time is not None:
         require_finite(raw.time, raw, raw.time_column, time=True)
     if "file" in time_spec:
-        _attach_time_file(raw, Path(data_root) / time_spec["file"])
+        _attach_time_file(raw, Path(data_root) / time_spec["file"], reader)
     return raw
 
 
@@ -292,7 +308,16 @@ def _column_index(table: _Table, column: str | int, display: str, kind: str) -> 
     if column in table.names:
         return table.names.index(column)
     shown = table.names if len(table.names) <= 20 else table.names[:20] + ["..."]
-    raise EnclabInputError(display, f"{kind} not found", column=column, expected=f"one of {shown}")
+    hint = None
+    joined = [(mark, label) for mark, label in ((";", "';'"), ("\t", "'\\t'"), (",", "','"))
+              if any(mark in str(name) for name in table.names)]
+    if joined:
+        mark, label = joined[0]
+        hint = (f"The column names run together at {label}: the fields are separated by {label}; "
+                f"set reader.delimiter: {label}" + (" (and reader.decimal: ',' for decimal commas)."
+                                                     if mark == ";" else "."))
+    raise EnclabInputError(display, f"{kind} not found", column=column, expected=f"one of {shown}",
+                           hint=hint)
 
 
 def _drop_trailing_empty(raw: RawLog, skip: bool) -> None:
@@ -335,18 +360,22 @@ def require_finite(values: np.ndarray, raw: RawLog, column: str | None, *, time:
     raise EnclabInputError(problem=problem, column=column, expected="a finite number", hint=hint, **raw.where(i))
 
 
-def _attach_time_file(raw: RawLog, path: Path) -> None:
+def _attach_time_file(raw: RawLog, path: Path, reader: dict) -> None:
     display = str(path)
     if not path.is_file():
         raise EnclabInputError(display, "time file not found", hint="Check the entry's time.file.")
-    lines = _read_lines(path, display)
+    lines = _read_lines(path, display, reader.get("encoding") or "utf-8")
+    decimal_comma = reader.get("decimal") == ","
     values, locations = [], []
     header_seen = False
     for number, line in enumerate(lines, start=1):
         text = line.strip()
         if not text:
             continue
-        fields = [f.strip() for f in text.replace(",", " ").split()]
+        if decimal_comma:
+            fields = [f.strip().replace(",", ".") for f in text.replace(";", " ").split()]
+        else:
+            fields = [f.strip() for f in text.replace(",", " ").split()]
         if len(fields) != 1:
             raise EnclabInputError(display, f"{len(fields)} values on one line", row=number, row_label="line",
                                    expected="one time value per line")
@@ -374,12 +403,54 @@ def _attach_time_file(raw: RawLog, path: Path) -> None:
     require_finite(raw.time, raw, None, time=True)
 
 
-def _read_lines(path: Path, display: str) -> list[str]:
+GZIP_MAGIC = b"\x1f\x8b"
+_UTF16_BOMS = (codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)
+
+
+def is_gzip(path: str | os.PathLike) -> bool:
+    """Whether a file is gzip-compressed (its first two bytes, whatever its name)."""
+    with open(path, "rb") as handle:
+        return handle.read(2) == GZIP_MAGIC
+
+
+def read_bytes(path: str | os.PathLike, display: str | None = None) -> bytes:
+    """The bytes of a data file, decompressed when it is gzip-compressed.
+
+    Raises
+    ------
+    EnclabInputError
+        A gzip file that ends early or is damaged.
+    """
+    data = Path(path).read_bytes()
+    if data[:2] != GZIP_MAGIC:
+        return data
     try:
-        return path.read_text(encoding="utf-8-sig", errors="strict").splitlines()
+        return gzip.decompress(data)
+    except (EOFError, gzip.BadGzipFile, zlib.error) as exc:
+        raise EnclabInputError(
+            display or str(path), f"not a complete gzip file ({exc})",
+            expected="a gzip-compressed file that decompresses whole",
+            hint="The file ends early or is damaged: copy it again (gunzip -t checks it).",
+        ) from None
+
+
+def _read_lines(path: Path, display: str, encoding: str = "utf-8") -> list[str]:
+    data = read_bytes(path, display)
+    name = codecs.lookup(encoding).name
+    try:
+        # utf-8-sig also drops the byte-order mark some Windows tools write first.
+        return data.decode("utf-8-sig" if name == "utf-8" else encoding).splitlines()
     except UnicodeDecodeError as exc:
-        raise EnclabInputError(display, f"not a UTF-8 text file ({exc.reason} at byte {exc.start})",
-                               expected="a text file") from None
+        line = data.count(b"\n", 0, exc.start) + 1
+        label = "UTF-8" if name == "utf-8" else encoding
+        if data[:2] in _UTF16_BOMS:
+            hint = "The file starts with a UTF-16 byte-order mark: set reader.encoding: utf-16."
+        else:
+            hint = ("Set reader.encoding to the file's encoding: latin-1 or cp1252 for most "
+                    "files written on Windows (a degree sign is then byte 0xb0).")
+        raise EnclabInputError(display, f"not a {label} text file (byte 0x{data[exc.start]:02x} "
+                               f"cannot be decoded)", row=line, row_label="line",
+                               expected=f"a {label} text file", hint=hint) from None
 
 
 def _split_function(delimiter: str):
@@ -390,29 +461,42 @@ def _split_function(delimiter: str):
     return lambda line: [f.strip() for f in line.split(delimiter)]
 
 
+_DECIMAL_COMMA = re.compile(r"[-+]?\d*,\d+([eE][-+]?\d+)?")
+
+
 def _parse_numbers(fields: list[str], column_label: str, locations: np.ndarray, row_label: str,
-                   display: str) -> np.ndarray:
-    """float64 array of text fields; empty fields become NaN, other text is an error."""
+                   display: str, decimal: str = ".") -> np.ndarray:
+    """float64 array of text fields; empty fields become NaN, other text is an error.
+
+    ``decimal`` is the decimal mark (``"."`` or ``","``, ``reader.decimal``).
+    """
+    numbers = [f.replace(",", ".") for f in fields] if decimal == "," else fields
     with contextlib.suppress(ValueError):  # fast path; the loop below locates the bad field
-        return np.array(fields, dtype=np.float64)
+        return np.array(numbers, dtype=np.float64)
     out = np.empty(len(fields), dtype=np.float64)
-    for i, text in enumerate(fields):
+    for i, text in enumerate(numbers):
         if text == "":
             out[i] = np.nan
             continue
         try:
             out[i] = float(text)
         except ValueError:
+            shown = fields[i]
+            if decimal == "." and _DECIMAL_COMMA.fullmatch(shown.strip()):
+                hint = ("The file writes decimal commas: set reader.decimal: ',' (and "
+                        "reader.delimiter: ';' if its fields are separated by semicolons).")
+            else:
+                hint = "Fix the value, or crop the log to exclude it (crop: t_start/t_end)."
             raise EnclabInputError(
-                display, f"text '{text}' in a numeric column", column=column_label,
-                row=int(locations[i]), row_label=row_label, expected="a number",
-                hint="Fix the value, or crop the log to exclude it (crop: t_start/t_end).",
+                display, f"text '{shown}' in a numeric column", column=column_label,
+                row=int(locations[i]), row_label=row_label, expected="a number", hint=hint,
             ) from None
     return out
 
 
 def _read_delimited(path: Path, display: str, fmt: str, reader: dict) -> _Table:
-    lines = _read_lines(path, display)
+    lines = _read_lines(path, display, reader.get("encoding") or "utf-8")
+    decimal = reader.get("decimal") or "."
     comment = reader.get("comment")
     header = reader.get("header")
     names_option = reader.get("column_names")
@@ -441,11 +525,11 @@ def _read_delimited(path: Path, display: str, fmt: str, reader: dict) -> _Table:
                                hint="Check that the logger finished writing the file.")
     delimiter = reader.get("delimiter", "auto")
     if delimiter == "auto":
-        delimiter = "," if "," in content[0][1] else "whitespace"
+        delimiter = _auto_delimiter(content[0][1], decimal)
     split = _split_function(delimiter)
 
     if per_sample is not None:
-        return _sample_major(content, split, per_sample, names_option, display)
+        return _sample_major(content, split, per_sample, names_option, display, decimal)
 
     numbers = np.fromiter((n for n, _ in content), dtype=np.int64, count=len(content))
     rows = [split(text.strip()) if delimiter == "whitespace" else split(text) for _, text in content]
@@ -481,12 +565,23 @@ def _read_delimited(path: Path, display: str, fmt: str, reader: dict) -> _Table:
                                row_label="line", expected=f"{width} values like the first data line")
 
     def getter(j: int) -> np.ndarray:
-        return _parse_numbers([r[j] for r in rows], names[j], numbers, "line", display)
+        return _parse_numbers([r[j] for r in rows], names[j], numbers, "line", display, decimal)
 
     return _Table(names, numbers, "line", getter)
 
 
-def _sample_major(content, split, per_sample: int, names_option, display: str) -> _Table:
+def _auto_delimiter(line: str, decimal: str) -> str:
+    """``reader.delimiter: auto``: semicolon, else comma (unless it is the decimal mark),
+    else whitespace, from the first data line."""
+    if ";" in line:
+        return ";"
+    if "," in line and decimal != ",":
+        return ","
+    return "whitespace"
+
+
+def _sample_major(content, split, per_sample: int, names_option, display: str,
+                  decimal: str = ".") -> _Table:
     fields = []
     for number, text in content:
         parts = split(text.strip())
@@ -506,7 +601,7 @@ def _sample_major(content, split, per_sample: int, names_option, display: str) -
     samples = np.arange(1, n + 1, dtype=np.int64)
 
     def getter(j: int) -> np.ndarray:
-        return _parse_numbers(fields[j::per_sample], names[j], samples, "sample", display)
+        return _parse_numbers(fields[j::per_sample], names[j], samples, "sample", display, decimal)
 
     return _Table(names, samples, "sample", getter)
 
@@ -519,8 +614,9 @@ def _clean_name(text: str) -> str:
 
 
 def _read_parquet(path: Path, display: str) -> _Table:
+    source = pa.BufferReader(read_bytes(path, display)) if is_gzip(path) else path
     try:
-        table = pq.read_table(path)
+        table = pq.read_table(source)
     except (pa.ArrowException, OSError) as exc:
         raise EnclabInputError(display, f"not a readable Parquet file ({exc})",
                                expected="a complete Parquet file",
@@ -543,8 +639,9 @@ def _read_parquet(path: Path, display: str) -> _Table:
 def _read_mat(path: Path, display: str, entry: dict) -> _Table:
     import scipy.io
 
+    source = _stdio.BytesIO(read_bytes(path, display)) if is_gzip(path) else path
     try:
-        data = scipy.io.loadmat(path, squeeze_me=False)
+        data = scipy.io.loadmat(source, squeeze_me=False)
     except NotImplementedError:
         raise EnclabInputError(display, "MATLAB v7.3 (HDF5) file", expected="a v5/v7 .mat file",
                                hint="Re-save it in MATLAB with save(..., '-v7').") from None
@@ -831,6 +928,16 @@ def read_json(path: str | os.PathLike) -> Any:
         return json.load(handle)
 
 
+def read_texts(folder: str | os.PathLike, pattern: str = "*") -> dict[str, str]:
+    """``{file name: text}`` of the files in ``folder`` matching ``pattern`` (none: ``{}``);
+    bytes that are not UTF-8 are replaced (these are logs to show, not data to parse)."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        return {}
+    return {p.name: p.read_text(encoding="utf-8", errors="replace")
+            for p in sorted(folder.glob(pattern)) if p.is_file()}
+
+
 def write_parquet(df: pd.DataFrame, path: str | os.PathLike, metadata: dict | None = None) -> None:
     """Write a DataFrame to Parquet atomically, with ``metadata`` as JSON under key ``b"enclab"``."""
     table = pa.Table.from_pandas(df, preserve_index=False)
@@ -862,6 +969,27 @@ def read_table(path: str | os.PathLike) -> pd.DataFrame:
     if suffix == ".csv":
         return pd.read_csv(path)
     raise ValueError(f"path must end in .csv or .parquet, got {str(path)!r}")
+
+
+def save_thumbnail(source: str | os.PathLike, path: str | os.PathLike, max_width: int = 480,
+                   colors: int = 64) -> None:
+    """A small copy of a PNG figure for the HTML report, written atomically.
+
+    Scaled to at most ``max_width`` pixels wide (aspect kept, Lanczos) and reduced to a palette
+    of ``colors`` colours: a tenth of the full figure's bytes, the same for the same input.
+    """
+    from PIL import Image
+
+    if max_width < 16 or not 2 <= colors <= 256:
+        raise ValueError(f"max_width must be >= 16 and colors in 2..256, got {max_width}, {colors}")
+    with Image.open(source) as image:
+        image = image.convert("RGB")
+    if image.width > max_width:
+        height = max(1, round(image.height * max_width / image.width))
+        image = image.resize((max_width, height), Image.LANCZOS)
+    image = image.quantize(colors=colors)
+    with _atomic_path(path) as tmp:
+        image.save(tmp, format="PNG", optimize=True)
 
 
 # Date stamps that would make figure files differ between identical runs.

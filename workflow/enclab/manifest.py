@@ -7,6 +7,7 @@ cannot express. Reading the YAML file is :func:`enclab.io.read_manifest`'s job.
 """
 from __future__ import annotations
 
+import codecs
 import copy
 import functools
 import posixpath
@@ -33,9 +34,12 @@ SCHEMA_PATH = Path(enclab.__file__).parents[1] / "schemas" / "manifest.schema.ya
 
 # Reader keys that apply to each format (the schema says the others must be left out).
 READER_KEYS = {
-    "csv": ("delimiter", "comment", "header", "column_names", "skip_trailing_empty"),
+    "csv": ("delimiter", "decimal", "encoding", "comment", "header", "column_names",
+            "skip_trailing_empty"),
     "text": (
         "delimiter",
+        "decimal",
+        "encoding",
         "comment",
         "header",
         "column_names",
@@ -48,6 +52,8 @@ READER_KEYS = {
 
 _READER_DEFAULTS = {
     "delimiter": "auto",
+    "decimal": ".",
+    "encoding": "utf-8",
     "comment": None,
     "column_names": None,
     "values_per_sample": None,
@@ -239,6 +245,16 @@ def _check_reader(entry: dict, where: str, fail) -> None:
         if reader.get("header") is not None:
             fail(f"{where}.reader.header", "a header line and column_names 'last_comment' both name "
                  "the columns", expected="header: null with column_names")
+    encoding = reader.get("encoding")
+    if encoding is not None:
+        try:
+            codecs.lookup(encoding)
+        except LookupError:
+            fail(f"{where}.reader.encoding", f"unknown encoding '{encoding}'",
+                 expected="a Python codec name such as utf-8, latin-1, cp1252 or utf-16")
+    if reader.get("decimal") == "," and reader.get("delimiter") == ",":
+        fail(f"{where}.reader.decimal", "a decimal comma in comma-separated fields",
+             expected="reader.delimiter ';', '\\t' or whitespace with decimal ','")
     names = reader.get("column_names")
     if isinstance(names, list) and len(set(names)) != len(names):
         fail(f"{where}.reader.column_names", "column names repeat", expected="unique names")

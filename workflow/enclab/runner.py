@@ -23,6 +23,7 @@ from typing import Any
 
 from enclab import io
 from enclab.errors import EnclabInputError
+from enclab.progress import QUIET_JOBS_ENV
 
 __all__ = ["run", "run_chunk", "error_line"]
 
@@ -48,9 +49,15 @@ def error_line(err: BaseException) -> str | None:
 
 
 def run(smk: Any, main: Callable[[Any], None]) -> None:
-    """Call ``main(smk)`` with logging set up and errors reported as one line."""
-    handlers: list[logging.Handler] = [logging.StreamHandler(sys.stderr)]
+    """Call ``main(smk)`` with logging set up and errors reported as one line.
+
+    Messages go to the rule's log file and to stderr; to the log file only under the
+    progress display of ``make run`` (:data:`enclab.progress.QUIET_JOBS_ENV`), which prints the
+    failed job's line itself.
+    """
     path = _log_path(smk)
+    quiet = bool(path) and bool(os.environ.get(QUIET_JOBS_ENV))
+    handlers: list[logging.Handler] = [] if quiet else [logging.StreamHandler(sys.stderr)]
     if path:
         handlers.append(logging.FileHandler(path, mode="w"))
     logging.basicConfig(level=logging.INFO, handlers=handlers, force=True, format=_FORMAT)
@@ -64,6 +71,12 @@ def run(smk: Any, main: Callable[[Any], None]) -> None:
         logger.error("%s%s", where, error_line(err))
         logger.debug("%s", traceback.format_exc())
         sys.exit(1)
+    except Exception as err:
+        # A bug, not bad input: its last line first (what a progress display shows), then
+        # the traceback, in the log file too.
+        logger.error("%s%s", where, traceback.format_exception_only(err)[-1].strip())
+        logger.error("%s", traceback.format_exc().rstrip())
+        raise
     # CPU of the whole job process, imports included, so that what a job costs beyond its work
     # can be measured (workflow/benchmarks/bench_batch.py reads it from the chunk jobs' logs).
     logger.info("%sdone in %.2f s, %.2f s CPU", where, time.perf_counter() - start,

@@ -8,15 +8,21 @@ same order on the same files, so both modes write byte-identical outputs.
 """
 from __future__ import annotations
 
+import functools
+import logging
 import os
 from collections.abc import Mapping
 from pathlib import Path
 
 from enclab import analysis, io
+from enclab import filters as flt
+from enclab.errors import EnclabInputError
 from enclab.residuals.pipeline import summary_block as residual_summary_block
 
 __all__ = [
+    "FIGURE_OUTPUTS",
     "QUANTIZATION_OUTPUTS",
+    "check_cutoffs",
     "ingest",
     "requantize",
     "kinematics",
@@ -24,9 +30,16 @@ __all__ = [
     "moments",
     "theory",
     "summary",
+    "log_figures",
     "quantization_log",
 ]
 
+# Output name -> file name under results/<log_id>/ of the per-log figures (rule log_figures),
+# which the chunked mode draws for the logs that show them.
+FIGURE_OUTPUTS = {
+    "errors": "figures/errors.png",
+    "comparison": "figures/comparison.png",
+}
 # Output name -> file name under results/<log_id>/ of the paper-000 stages, in stage order.
 QUANTIZATION_OUTPUTS = {
     "canonical": "canonical.parquet",
@@ -41,10 +54,47 @@ QUANTIZATION_OUTPUTS = {
 PathLike = str | os.PathLike
 
 
+_LOG = logging.getLogger("enclab.stages")
+
+
 def ingest(entry: Mapping, data_root: PathLike, devices: Mapping, canonical: PathLike) -> None:
-    """One manifest entry -> the canonical Parquet log."""
+    """One manifest entry -> the canonical Parquet log (its warnings are logged too)."""
     df, meta = io.ingest_log(entry, data_root, devices)
+    for line in meta.get("warnings") or []:
+        _LOG.warning("[%s] %s", meta["log_id"], line)
     io.write_canonical(df, meta, canonical)
+
+
+@functools.lru_cache(maxsize=64)
+def _filter_memory(fs: float, bank: tuple) -> int:
+    """Samples of the longest impulse response of a bank, as the theory stage computes them
+    (the same for every log sampled at ``fs``: computed once per process)."""
+    filters = analysis.filter_bank({"bank": dict(bank)})
+    return max(flt.impulse_response(f, fs, tol=analysis._IMPULSE_TOL).size for f in filters)
+
+
+def check_cutoffs(settings: Mapping, meta: Mapping) -> None:
+    """The log suits the derivative filters: :func:`enclab.analysis.check_cutoffs`, and longer
+    than the longest filter memory (the theory stage's own check, made before the moments stage
+    too, so that every stage names the same fix). When the log's time base is implausible, the
+    error names that fix instead (a cutoff above Nyquist is then its symptom)."""
+    try:
+        analysis.check_cutoffs(settings, meta)
+    except EnclabInputError as err:
+        time_base = [w for w in meta.get("warnings") or [] if w.startswith("time base:")]
+        if not time_base:
+            raise
+        fix = time_base[0][len("time base: "):]
+        raise EnclabInputError(err.file, err.problem, key=err.key, expected=err.expected,
+                               hint=fix[0].upper() + fix[1:]) from None
+    bank = tuple((k, tuple(v)) for k, v in sorted(settings["bank"].items()))
+    memory = _filter_memory(float(meta["fs_hz"]), bank)
+    if int(meta["n_samples"]) < memory:
+        raise EnclabInputError(
+            "configuration", f"log '{meta.get('log_id')}' has {int(meta['n_samples'])} samples, "
+            f"fewer than the longest derivative filter's memory ({memory} samples)",
+            key="derivatives.bank.fc_hz", expected="a log longer than every filter's memory",
+            hint="Use higher cutoffs, or leave the log out.")
 
 
 def requantize(canonical: PathLike, settings: Mapping, requantized: PathLike) -> None:
@@ -67,7 +117,7 @@ def kinematics(requantized: PathLike, out: PathLike) -> None:
 def derivatives(requantized: PathLike, settings: Mapping, export: list, out: PathLike) -> None:
     """The exported derivative estimators (``settings``: ``config["derivatives"]``)."""
     req, meta = io.read_canonical(requantized)
-    analysis.check_cutoffs(settings, meta)
+    check_cutoffs(settings, meta)
     io.write_canonical(analysis.export_derivatives(req, meta, meta["levels"], export), meta, out)
 
 
@@ -76,7 +126,7 @@ def moments(requantized: PathLike, kinematics_path: PathLike, settings: Mapping,
     """Empirical error moments over the whole derivative-filter bank."""
     req, meta = io.read_canonical(requantized)
     kin, _ = io.read_canonical(kinematics_path)
-    analysis.check_cutoffs(settings, meta)
+    check_cutoffs(settings, meta)
     rows = analysis.empirical_rows(
         req, kin, meta, meta["levels"], analysis.filter_bank(settings),
         settings["architectures"], settle_tol=settings["settle_tol"],
@@ -89,7 +139,7 @@ def theory(requantized: PathLike, kinematics_path: PathLike, settings: Mapping,
     """Table II, the exact model and the trajectory worst case for every row."""
     req, meta = io.read_canonical(requantized)
     kin, _ = io.read_canonical(kinematics_path)
-    analysis.check_cutoffs(settings, meta)
+    check_cutoffs(settings, meta)
     rows = analysis.theory_rows(req, kin, meta, meta["levels"], analysis.filter_bank(settings),
                                 settings["architectures"], settle_tol=settings["settle_tol"])
     io.write_json({"log_id": meta["log_id"], "rows": rows}, out)
@@ -112,6 +162,7 @@ def summary(inputs: Mapping[str, PathLike], out: PathLike) -> None:
     else:
         _, meta = io.read_canonical(inputs["canonical"])
         block = analysis.log_header(meta)
+    block["warnings"] = list(meta.get("warnings") or [])
     if "lrde" in inputs:
         block["lrde"] = io.read_json(inputs["lrde"])
     if "residuals" in inputs:
@@ -123,13 +174,39 @@ def summary(inputs: Mapping[str, PathLike], out: PathLike) -> None:
     io.write_json(block, out)
 
 
+def log_figures(inputs: Mapping[str, PathLike], export: list, settle_tol: float,
+                errors: PathLike, comparison: PathLike) -> None:
+    """The per-log figures: error traces and the theory-vs-measured comparison.
+
+    ``inputs`` holds ``requantized``, ``kinematics``, ``derivatives`` and ``summary``;
+    ``export`` and ``settle_tol`` are ``config["derivatives"]`` keys.
+    """
+    from enclab import plots  # matplotlib: only jobs that draw import it
+
+    req, meta = io.read_canonical(inputs["requantized"])
+    kin, _ = io.read_canonical(inputs["kinematics"])
+    deriv, _ = io.read_canonical(inputs["derivatives"])
+    summary_block = io.read_json(inputs["summary"])
+    level = meta["levels"][0]["label"]
+    tr = analysis.error_traces(req, kin, deriv, meta, level, export, settle_tol)
+    title = f"{meta['log_id']}: {tr['signal']} error at {level}"
+    io.save_figure(plots.error_trace_figure(tr["t"], tr["errors"], title, tr["unit"],
+                                            step=tr["step"]), errors)
+    table = analysis.summary_table(summary_block)
+    truth = analysis.truth_channels(meta)[0]
+    native = truth.get("step") or truth.get("native_step")
+    fig = plots.real_log_figure(table, f"{meta['log_id']}: measured vs theory",
+                                native_step=native, step_unit=truth["unit"])
+    io.save_figure(fig, comparison)
+
+
 def quantization_log(entry: Mapping, folder: PathLike, config: Mapping,
-                     data_root: PathLike) -> None:
+                     data_root: PathLike, figures: bool = False) -> None:
     """Every paper-000 stage of one log, ``ingest`` to ``summary``, into ``folder``.
 
     The same calls, in the same order, as the per-stage rules of
     ``workflow/rules/{ingest,quantization}.smk``; ``folder`` receives the files of
-    :data:`QUANTIZATION_OUTPUTS`.
+    :data:`QUANTIZATION_OUTPUTS`, and with ``figures`` those of :data:`FIGURE_OUTPUTS`.
 
     Parameters
     ----------
@@ -141,6 +218,8 @@ def quantization_log(entry: Mapping, folder: PathLike, config: Mapping,
         The workflow configuration (``devices``, ``requantize``, ``derivatives``, ``moments``).
     data_root : path-like
         The manifest's data root.
+    figures : bool
+        Also draw the per-log figures (rule ``log_figures``).
     """
     folder = Path(folder)
     out = {name: folder / file for name, file in QUANTIZATION_OUTPUTS.items()}
@@ -153,3 +232,6 @@ def quantization_log(entry: Mapping, folder: PathLike, config: Mapping,
     theory(out["requantized"], out["kinematics"], d, out["theory"])
     summary({k: out[k] for k in ("canonical", "requantized", "moments", "theory")},
             out["summary"])
+    if figures:
+        log_figures(out, d["export"], d["settle_tol"], folder / FIGURE_OUTPUTS["errors"],
+                    folder / FIGURE_OUTPUTS["comparison"])

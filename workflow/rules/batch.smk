@@ -24,8 +24,7 @@ rule ratio_figure:
     input:
         pooled="results/batch/pooled.csv",
     output:
-        ratios=report("results/figures/ratios.png", category="Paper 000",
-                      caption="../report/ratio_figure.rst"),
+        ratios="results/figures/ratios.png",
     params:
         code=CODE_DIGEST,
     log:
@@ -42,10 +41,8 @@ rule paper_figures:
     input:
         pooled="results/batch/pooled.csv",
     output:
-        fig6=report("results/figures/fig6_position.png", category="Paper 000",
-                    caption="../report/fig6.rst"),
-        fig7=report("results/figures/fig7_derivatives.png", category="Paper 000",
-                    caption="../report/fig7.rst"),
+        fig6="results/figures/fig6_position.png",
+        fig7="results/figures/fig7_derivatives.png",
     params:
         figures=config["figures"],
         code=CODE_DIGEST,
@@ -55,3 +52,46 @@ rule paper_figures:
         "results/batch/benchmarks/paper_figures.tsv"
     script:
         "../../scripts/paper_figures.py"
+
+
+# ----------------------------------------------------------------------------- run summary, report
+# The figures' thumbnails and the run summary (helpers in common.smk: REPORT_FIGURES).
+
+
+rule report_thumbnails:
+    input:
+        [src for pairs in report_figures().values() for src, _ in pairs],
+    output:
+        **thumbnail_outputs(),
+    params:
+        pairs=[pair for pairs in report_figures().values() for pair in pairs],
+        width=THUMBNAIL_WIDTH,
+        code=CODE_DIGEST,
+    log:
+        "results/logs/report_thumbnails.log",
+    benchmark:
+        "results/logs/report_thumbnails.benchmark.tsv"
+    script:
+        "../../scripts/report_thumbnails.py"
+
+
+# What ran, the headline number of each analysis, what failed and why: results/summary.json,
+# the text `make run` prints at its end, and the page the HTML report opens on (common.smk).
+rule run_summary:
+    input:
+        unpack(run_summary_inputs),
+    output:
+        summary="results/summary.json",
+        text="results/summary.txt",
+        page="results/report/summary.rst",
+        metadata="results/report/metadata.yaml",
+    params:
+        log_ids=sorted(ENTRIES),
+        failed=sorted(set(ENTRIES) - set(LOG_IDS)),
+        code=CODE_DIGEST,
+    log:
+        "results/logs/run_summary.log",
+    benchmark:
+        "results/logs/run_summary.benchmark.tsv"
+    script:
+        "../../scripts/run_summary.py"

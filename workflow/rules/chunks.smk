@@ -1,11 +1,11 @@
-# Chunked mode for many small logs (config chunk_size = K > 0; common.smk cuts the chunks).
-# A Snakemake `script:` job starts a new Python and imports the package: with one job per stage
-# and log that start-up costs more than the work of a short log. Here one job runs every paper-000
-# stage of K logs (scripts/process_chunk.py, the same enclab.stages calls as the per-stage
-# rules), staging each log's outputs; then one shell job per log hard-links them into
-# results/<log_id>/ or fails with that log's error line, so a bad log still fails alone, leaves
-# no output, and the rest of the workflow (figures, batch tables, `make run`'s second pass) sees
-# the usual per-log files.
+# Chunked mode, the default (config chunk_size = K > 0; common.smk cuts the chunks; 0 = one job
+# per stage and log). A Snakemake `script:` job starts a new Python and imports the package:
+# with one job per stage and log that start-up costs more than the work of a short log. Here one
+# job runs every paper-000 stage of K logs (scripts/process_chunk.py, the same enclab.stages
+# calls as the per-stage rules), and draws the per-log figures of the logs that show them,
+# staging each log's outputs; then one shell job per log hard-links them into results/<log_id>/
+# or fails with that log's error line, so a bad log still fails alone, leaves no output, and the
+# rest of the workflow (batch tables, `make run`'s second pass) sees the usual per-log files.
 
 
 rule process_chunk:
@@ -20,6 +20,7 @@ rule process_chunk:
         requantize=config["requantize"],
         derivatives=config["derivatives"],
         moments=config["moments"],
+        figures=lambda wc: [i for i in CHUNKS[wc.chunk] if i in CHUNK_FIGURE_IDS],
         code=CODE_DIGEST,
     threads: 1
     log:
@@ -62,11 +63,38 @@ rule publish_log:
         "results/{log_id}/benchmarks/quantization.tsv"
     shell:
         "ln -f {params.staged:q}.log {log:q}; "
-        "if [ -e {params.staged:q}.failed ]; then cat {params.staged:q}.failed >&2; exit 1; fi; "
+        "if [ -e {params.staged:q}.failed ]; then "
+        "[ -n \"${{ENCLAB_QUIET_JOBS:-}}\" ] || cat {params.staged:q}.failed >&2; exit 1; fi; "
         "ln -f {params.files:q} {params.folder:q}/"
 
 
+# The figures a chunk drew (CHUNK_FIGURE_IDS); as publish_log, a failed log fails here too.
+rule publish_figures:
+    input:
+        staging=lambda wc: f"results/.chunks/{CHUNK_OF[wc.log_id]}",
+    output:
+        errors="results/{log_id}/figures/errors.png",
+        comparison="results/{log_id}/figures/comparison.png",
+    params:
+        staged=lambda wc: f"results/.chunks/{CHUNK_OF[wc.log_id]}/{wc.log_id}",
+        files=lambda wc, output: [f"results/.chunks/{CHUNK_OF[wc.log_id]}/{wc.log_id}/"
+                                  f"figures/{os.path.basename(f)}" for f in output],
+        folder=lambda wc: f"results/{wc.log_id}/figures",
+    wildcard_constraints:
+        log_id=ids_regex(CHUNK_FIGURE_IDS),
+    localrule: True
+    log:
+        "results/{log_id}/logs/publish_figures.log",
+    benchmark:
+        "results/{log_id}/benchmarks/publish_figures.tsv"
+    shell:
+        "if [ -e {params.staged:q}.failed ]; then cp {params.staged:q}.failed {log:q}; "
+        "[ -n \"${{ENCLAB_QUIET_JOBS:-}}\" ] || cat {params.staged:q}.failed >&2; exit 1; fi; "
+        "ln -f {params.files:q} {params.folder:q}/ 2> {log:q}"
+
+
 # For a chunked log both publish_log and the per-stage rules could make its files.
+ruleorder: publish_figures > log_figures
 ruleorder: publish_log > ingest
 ruleorder: publish_log > requantize
 ruleorder: publish_log > kinematics

@@ -92,6 +92,14 @@ def _first_of_groups(ids):
 
 
 FIGURE_IDS = _first_of_groups(QUANT_IDS)
+# The HTML report (snakemake --report) opens on the run summary once rule run_summary wrote it.
+REPORT_PAGE = "results/report/summary.rst"
+report: os.path.abspath(REPORT_PAGE) if os.path.exists(REPORT_PAGE) else "../report/workflow.rst"
+# The chunked logs whose figures their chunk draws: as FIGURE_IDS, but over every log of the
+# manifest (like the chunks themselves), so that the second pass finds the chunks complete.
+CHUNK_FIGURE_IDS = [i for i in _first_of_groups([i for i in sorted(ENTRIES)
+                                                  if "quantization" in _stages(ENTRIES[i])])
+                    if i in CHUNK_OF]
 CODE_DIGEST = enclab.code_digest()
 
 
@@ -187,4 +195,88 @@ def all_targets():
                     for p in pairs for name in ("diagnostics.png", "before_after.png")]
     if RESIDUAL_IDS:
         targets += ["results/batch/residuals.csv"]
+    # batch.smk: the run summary and the report's thumbnails
+    targets += ["results/summary.json"]
+    targets += [f"results/report/thumbs/{kind}" for kind in report_figures()]
     return targets
+
+
+# ----------------------------------------------------------------------------- report (batch.smk)
+# Every figure the workflow draws enters the HTML report as a thumbnail (under 5 MB for the
+# embedded default); the full-size figures stay in results/ and each caption links its own.
+# kind: (full-size figure, caption, report category, subcategory); a new figure adds a line.
+REPORT_FIGURES = {
+    "log_errors": ("results/{log_id}/figures/errors.png", "log_errors.rst", "Per log", "{log_id}"),
+    "log_comparison": ("results/{log_id}/figures/comparison.png", "log_comparison.rst", "Per log",
+                       "{log_id}"),
+    "lrde_corner": ("results/{log_id}/lrde/corner.png", "lrde_corner.rst", "Paper 002", "{log_id}"),
+    "lrde_dwell": ("results/{log_id}/lrde/dwell_ppc.png", "lrde_dwell.rst", "Paper 002", "{log_id}"),
+    "lrde_bias_cycles": ("results/{log_id}/lrde/bias_cycles.png", "lrde_bias_cycles.rst", "Paper 002",
+                         "{log_id}"),
+    "residual_diagnostics": ("results/{log_id}/residuals/{channel}/diagnostics.png",
+                             "residual_diagnostics.rst", "Residuals", "{log_id}"),
+    "residual_before_after": ("results/{log_id}/residuals/{channel}/before_after.png",
+                              "residual_before_after.rst", "Residuals", "{log_id}"),
+    "ratio_figure": ("results/figures/ratios.png", "ratio_figure.rst", "Paper 000", None),
+    "fig6": ("results/figures/fig6_position.png", "fig6.rst", "Paper 000", None),
+    "fig7": ("results/figures/fig7_derivatives.png", "fig7.rst", "Paper 000", None),
+}
+THUMBNAIL_WIDTH = 480
+
+
+def report_figures():
+    """{kind: [(full-size figure, thumbnail)]} of the figures this run draws."""
+    instances = {
+        "log_errors": [{"log_id": i} for i in FIGURE_IDS],
+        "lrde_corner": [{"log_id": i} for i in LRDE_IDS],
+        "residual_diagnostics": [{"log_id": i, "channel": p["measured"]}
+                                 for i, pairs in RESIDUAL_PAIRS.items() for p in pairs],
+        "ratio_figure": [{}] if QUANT_IDS else [],
+        "fig6": [{}] if paper_figures_apply() else [],
+    }
+    for kind, same in (("log_comparison", "log_errors"), ("lrde_dwell", "lrde_corner"),
+                       ("lrde_bias_cycles", "lrde_corner"),
+                       ("residual_before_after", "residual_diagnostics"), ("fig7", "fig6")):
+        instances[kind] = instances[same]
+    out = {}
+    for kind, (pattern, *_) in REPORT_FIGURES.items():
+        pairs = []
+        for wc in instances[kind]:
+            if "log_id" in wc:
+                name = os.path.join(wc["log_id"], wc["channel"]) if "channel" in wc else wc["log_id"]
+            else:
+                name = os.path.basename(pattern)[: -len(".png")]
+            pairs.append((pattern.format(**wc), f"results/report/thumbs/{kind}/{name}.png"))
+        if pairs:
+            out[kind] = pairs
+    return out
+
+
+def _thumbnail_pattern(kind):
+    pattern = REPORT_FIGURES[kind][0]
+    if "{channel}" in pattern:
+        return "{log_id}/{channel}.png"
+    return "{log_id}.png" if "{log_id}" in pattern else "{name}.png"
+
+
+def thumbnail_outputs():
+    return {kind: report(directory(f"results/report/thumbs/{kind}"),
+                         patterns=[_thumbnail_pattern(kind)],
+                         caption=f"../report/{REPORT_FIGURES[kind][1]}",
+                         category=REPORT_FIGURES[kind][2], subcategory=REPORT_FIGURES[kind][3])
+            for kind in report_figures()}
+
+
+def run_summary_inputs(wildcards):
+    inputs = {"summaries": expand("results/{log_id}/summary.json", log_id=LOG_IDS),
+              "figures": [src for pairs in report_figures().values() for src, _ in pairs]}
+    tables = []
+    if QUANT_IDS:
+        inputs.update(ratios="results/batch/ratios.csv",
+                      violations="results/batch/bound_violations.csv")
+        tables += ["results/batch/quantization.csv", "results/batch/pooled.csv",
+                   "results/batch/ratios.csv", "results/batch/bound_violations.csv"]
+    tables += ["results/batch/lrde.csv"] if LRDE_IDS else []
+    tables += ["results/batch/residuals.csv"] if RESIDUAL_IDS else []
+    inputs["tables"] = tables
+    return inputs

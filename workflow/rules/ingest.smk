@@ -11,6 +11,8 @@ rule ingest:
         data_root=DATA_ROOT,
         devices=config["devices"],
         code=CODE_DIGEST,
+    # before the chunks: the logs that still ingest alone lead to the longest jobs (lrde_fit)
+    priority: 1
     log:
         "results/{log_id}/logs/ingest.log",
     benchmark:

@@ -106,10 +106,9 @@ rule log_figures:
         derivatives="results/{log_id}/derivatives.parquet",
         summary="results/{log_id}/summary.json",
     output:
-        errors=report("results/{log_id}/figures/errors.png", category="Per log",
-                      subcategory="{log_id}", caption="../report/log_errors.rst"),
-        comparison=report("results/{log_id}/figures/comparison.png", category="Per log",
-                          subcategory="{log_id}", caption="../report/log_comparison.rst"),
+        # in the report as thumbnails (REPORT_FIGURES, batch.smk)
+        errors="results/{log_id}/figures/errors.png",
+        comparison="results/{log_id}/figures/comparison.png",
     params:
         export=config["derivatives"]["export"],
         settle_tol=config["derivatives"]["settle_tol"],

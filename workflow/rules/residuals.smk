@@ -9,12 +9,9 @@ rule residuals:
         block="results/{log_id}/residuals/{channel}/residuals.json",
         table=report("results/{log_id}/residuals/{channel}/before_after.csv", category="Residuals",
                      subcategory="{log_id}", caption="../report/residual_table.rst"),
-        diagnostics=report("results/{log_id}/residuals/{channel}/diagnostics.png",
-                           category="Residuals", subcategory="{log_id}",
-                           caption="../report/residual_diagnostics.rst"),
-        before_after=report("results/{log_id}/residuals/{channel}/before_after.png",
-                            category="Residuals", subcategory="{log_id}",
-                            caption="../report/residual_before_after.rst"),
+        # figures: in the report as thumbnails (REPORT_FIGURES, batch.smk)
+        diagnostics="results/{log_id}/residuals/{channel}/diagnostics.png",
+        before_after="results/{log_id}/residuals/{channel}/before_after.png",
     params:
         pair=lambda wc: residual_pair(wc),
         settings=lambda wc: residual_settings(wc),

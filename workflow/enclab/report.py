@@ -1,0 +1,268 @@
+"""The run summary: what ran, the headline number of each analysis, what failed and why.
+
+:func:`run_summary` condenses the per-log ``summary.json`` files, the batch tables and the
+error lines of the logs that failed into one dictionary (``results/summary.json``);
+:func:`summary_text` prints it at the end of ``make run`` and :func:`summary_rst` is the page
+the HTML report opens on. Pure functions: the rule script ``scripts/run_summary.py`` reads the
+files and writes the results.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import pandas as pd
+
+from enclab.residuals.pipeline import batch_rows as residual_rows
+
+__all__ = ["failure_of", "report_metadata", "run_summary", "summary_rst", "summary_text"]
+
+_ORDER_NAMES = {0: "position", 1: "velocity", 2: "acceleration"}
+_LRDE_QUANTITIES = ("A12", "E_b", "offset_a", "bias_b")
+
+
+def failure_of(log_texts: Mapping[str, str]) -> dict:
+    """The stage and the one-line error of a failed log, from its rule logs.
+
+    Parameters
+    ----------
+    log_texts : mapping
+        ``{file name: text}`` of the log's files under ``results/<log_id>/logs/``.
+
+    Returns
+    -------
+    dict
+        ``stage`` (the log file's name without ``.log``, e.g. ``quantization`` or ``ingest``)
+        and ``error`` (the first ``ERROR`` line, without its time stamp and log id), or a
+        pointer to the folder when no log holds an error line.
+    """
+    for name in sorted(log_texts):
+        for line in log_texts[name].splitlines():
+            if " ERROR " in line:
+                message = line.split(" ERROR ", 1)[1].strip()
+                if message.startswith("[") and "] " in message:
+                    message = message.split("] ", 1)[1]
+                return {"stage": name.removesuffix(".log"), "error": message}
+    return {"stage": None, "error": "no error line in its logs (results/<log_id>/logs/)"}
+
+
+def _num(value) -> float | None:
+    if value is None:
+        return None
+    value = float(value)
+    return value if math.isfinite(value) else None
+
+
+def _quantization(summaries: Sequence[Mapping], ratios: pd.DataFrame | None,
+                  violations: pd.DataFrame | None) -> dict | None:
+    logs = [s["log_id"] for s in summaries if s.get("quantization")]
+    if not logs:
+        return None
+    orders = []
+    if ratios is not None and not ratios.empty:
+        for order, rows in ratios.groupby("order", sort=True):
+            orders.append({
+                "order": int(order), "name": _ORDER_NAMES.get(int(order), f"order {order}"),
+                "n_rows": int(rows["n_rows"].sum()),
+                "exact": [_num(rows["ratio_exact_min"].min()), _num(rows["ratio_exact_max"].max())],
+                "pqn": [_num(rows["ratio_pqn_min"].min()), _num(rows["ratio_pqn_max"].max())],
+            })
+    return {"logs": len(logs), "ratios": orders,
+            "bound_violations": None if violations is None else int(len(violations))}
+
+
+def _lrde(summaries: Sequence[Mapping]) -> dict | None:
+    rows = []
+    for s in summaries:
+        block = s.get("lrde")
+        if not block:
+            continue
+        diag = block.get("diagnostics") or {}
+        row = {"log_id": s["log_id"], "converged": diag.get("converged"),
+               "rhat_max": _num(diag.get("rhat_max")), "ess_min": _num(diag.get("ess_min")),
+               "reason": block.get("reason")}
+        for key in _LRDE_QUANTITIES:
+            q = block.get(key)
+            row[key] = None if q is None else {k: _num(q.get(k)) for k in ("median", "q05", "q95")}
+        rows.append(row)
+    return {"logs": len(rows), "rows": rows} if rows else None
+
+
+def _residuals(summaries: Sequence[Mapping]) -> dict | None:
+    rows = []
+    for s in summaries:
+        # a coarse log's block from its held-out motion-model comparison has no channels
+        if "channels" not in (s.get("residuals") or {}):
+            continue
+        for row in residual_rows(s):
+            rows.append({k: row.get(k) for k in ("log_id", "measured", "truth", "verdict", "effects",
+                                                 "after_over_floor", "explained")})
+    if not rows:
+        return None
+    return {"channels": len(rows), "explained": sum(1 for r in rows if r["explained"]),
+            "rows": rows}
+
+
+def run_summary(summaries: Sequence[Mapping], log_ids: Sequence[str],
+                failures: Mapping[str, Mapping], *, ratios: pd.DataFrame | None = None,
+                violations: pd.DataFrame | None = None,
+                written: Mapping[str, int] | None = None) -> dict:
+    """Condense a run into what ran, the headline numbers, failures and warnings.
+
+    Parameters
+    ----------
+    summaries : sequence of dict
+        The ``summary.json`` of every log that completed.
+    log_ids : sequence of str
+        Every log of the run (completed or not).
+    failures : mapping
+        ``{log_id: failure_of(...)}`` of the logs that did not complete.
+    ratios, violations : DataFrame, optional
+        ``results/batch/ratios.csv`` and ``results/batch/bound_violations.csv``.
+    written : mapping, optional
+        Counts of the files written, by kind (``{"summaries": 70, ...}``).
+
+    Returns
+    -------
+    dict
+        ``logs`` {total, completed, failed}, ``analyses`` {quantization, lrde, residuals}
+        (None for an analysis that did not run), ``failed`` [{log_id, stage, error}],
+        ``warnings`` [{log_id, warning}], ``written``.
+    """
+    completed = sorted(s["log_id"] for s in summaries)
+    missing = sorted(set(log_ids) - set(completed))
+    unknown = sorted(set(failures) - set(missing))
+    if unknown:
+        raise ValueError(f"failures given for logs that completed or are not in the run: {unknown}")
+    failed = [{"log_id": i, **dict(failures.get(i) or failure_of({}))} for i in missing]
+    warnings = [{"log_id": s["log_id"], "warning": w}
+                for s in sorted(summaries, key=lambda s: s["log_id"]) for w in s.get("warnings") or []]
+    return {
+        "logs": {"total": len(set(log_ids) | set(completed)), "completed": len(completed),
+                 "failed": len(failed)},
+        "analyses": {"quantization": _quantization(summaries, ratios, violations),
+                     "lrde": _lrde(summaries), "residuals": _residuals(summaries)},
+        "failed": failed,
+        "warnings": warnings,
+        "written": dict(written or {}),
+    }
+
+
+def _count(n: int, noun: str) -> str:
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
+
+
+def _angle(value: float | None) -> str:
+    if value is None:
+        return "n/a"
+    return f"{value * 1e3:.4g} mrad" if abs(value) < 0.1 else f"{value:.4g} rad"
+
+
+def _range(pair) -> str:
+    lo, hi = pair
+    return "n/a" if lo is None or hi is None else f"{lo:.3f}-{hi:.3f}"
+
+
+def _headlines(run: Mapping) -> list[tuple[str, list[str]]]:
+    """``(analysis, lines)`` pairs in the order the analyses are reported."""
+    out = []
+    q = run["analyses"].get("quantization")
+    if q:
+        lines = []
+        for o in q["ratios"]:
+            lines.append(f"{o['name']}: measured/exact std {_range(o['exact'])}, measured/PQN "
+                         f"{_range(o['pqn'])} ({o['n_rows']} rows)")
+        if q.get("bound_violations") is not None:
+            lines.append("max|error| within the trajectory worst case in every row"
+                         if q["bound_violations"] == 0 else
+                         f"max|error| above the trajectory worst case in {q['bound_violations']} rows "
+                         "(results/batch/bound_violations.csv)")
+        out.append((f"quantization ({_count(q['logs'], 'log')})", lines))
+    lrde = run["analyses"].get("lrde")
+    if lrde:
+        lines = []
+        for r in lrde["rows"]:
+            parts = []
+            for key in _LRDE_QUANTITIES:
+                q3 = r.get(key)
+                if q3 and q3.get("median") is not None:
+                    parts.append(f"{key} {_angle(q3['median'])} [{_angle(q3['q05'])}, {_angle(q3['q95'])}]")
+            state = "converged" if r.get("converged") else "NOT converged"
+            lines.append(f"{r['log_id']}: " + ", ".join(parts) + f" (90 %; {state})")
+        out.append((f"low-resolution encoder ({_count(lrde['logs'], 'log')})", lines))
+    res = run["analyses"].get("residuals")
+    if res:
+        lines = []
+        for r in res["rows"]:
+            effects = r.get("effects") or "no effect needed"
+            ratio = r.get("after_over_floor")
+            ratio = "" if ratio is None else f", after/floor {ratio:.2f}"
+            lines.append(f"{r['log_id']}/{r['measured']}: {r['verdict']}{ratio}; {effects}")
+        out.append((f"residuals ({_count(res['channels'], 'channel')}, {res['explained']} explained)",
+                    lines))
+    return out
+
+
+def _written_line(run: Mapping) -> str:
+    written = run.get("written") or {}
+    return ", ".join(f"{n} {kind}" for kind, n in written.items())
+
+
+def summary_text(run: Mapping) -> str:
+    """The run summary as plain text (printed at the end of ``make run``)."""
+    logs = run["logs"]
+    lines = [f"enclab: {_count(logs['total'], 'log')}, {logs['completed']} completed, "
+             f"{logs['failed']} failed"]
+    for title, items in _headlines(run):
+        lines.append(f"  {title}")
+        lines += [f"    {item}" for item in items]
+    if run["warnings"]:
+        lines.append(f"  warnings ({len(run['warnings'])})")
+        lines += [f"    {w['log_id']}: {w['warning']}" for w in run["warnings"]]
+    if run["failed"]:
+        lines.append(f"  FAILED ({len(run['failed'])}; each log's messages: results/<log_id>/logs/)")
+        lines += [f"    {f['log_id']} [{f['stage']}]: {f['error']}" for f in run["failed"]]
+    if run.get("written"):
+        lines.append(f"  written under results/: {_written_line(run)}")
+    return "\n".join(lines) + "\n"
+
+
+def _rst_text(text: Any) -> str:
+    """Text for an rst paragraph: one line, markup characters escaped."""
+    text = " ".join(str(text).split())
+    for char in "\\*`_|":
+        text = text.replace(char, "\\" + char)
+    return text
+
+
+def summary_rst(run: Mapping) -> str:
+    """The run summary as reStructuredText: the page the HTML report opens on.
+
+    The report renders this page as a Jinja template, so it is wrapped in a raw block.
+    """
+    logs = run["logs"]
+    out = ["{% raw %}", "enclab run summary", "==================", "",
+           f"**{_count(logs['total'], 'log')}**: {logs['completed']} completed, "
+           f"**{logs['failed']} failed**.",
+           ""]
+    for title, items in _headlines(run):
+        out += [f"**{_rst_text(title)}**", ""]
+        out += [f"- {_rst_text(item)}" for item in items] + [""]
+    if run["failed"]:
+        out += ["**Failed logs** (their messages: ``results/<log_id>/logs/``)", ""]
+        out += [f"- ``{f['log_id']}`` [{_rst_text(f['stage'])}]: {_rst_text(f['error'])}"
+                for f in run["failed"]] + [""]
+    if run["warnings"]:
+        out += ["**Warnings**", ""]
+        out += [f"- ``{w['log_id']}``: {_rst_text(w['warning'])}" for w in run["warnings"]] + [""]
+    if run.get("written"):
+        out += [f"Written under ``results/``: {_rst_text(_written_line(run))}. Figures appear "
+                "here as thumbnails; each caption links the full-size figure.", ""]
+    out += ["{% endraw %}", ""]
+    return "\n".join(out)
+
+
+def report_metadata(run: Mapping) -> dict:
+    """Numbers for the report's landing page (``snakemake --report-metadata``)."""
+    return {"logs completed": run["logs"]["completed"], "logs failed": run["logs"]["failed"]}
