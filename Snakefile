@@ -12,6 +12,7 @@ include: "workflow/rules/batch.smk"
 include: "workflow/rules/lrde.smk"
 include: "workflow/rules/residuals.smk"
 include: "workflow/rules/chunks.smk"
+include: "workflow/rules/design.smk"
 
 
 rule all:

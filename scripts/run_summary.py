@@ -14,10 +14,12 @@ def main(smk):
                 for i in smk.params.failed}
     ratios = io.read_table(smk.input.ratios) if "ratios" in smk.input.keys() else None
     violations = io.read_table(smk.input.violations) if "violations" in smk.input.keys() else None
+    design = io.read_json(smk.input.design)["design"] if "design" in smk.input.keys() else None
     written = {"summary.json": len(summaries), "figures": len(smk.input.figures),
                "batch tables": len(smk.input.tables)}
     summary = report.run_summary(summaries, smk.params.log_ids, failures, ratios=ratios,
-                                 violations=violations, written=written)
+                                 violations=violations, design=design,
+                                 written=written)
     io.write_json(summary, smk.output.summary)
     io.write_text(report.summary_text(summary), smk.output.text)
     io.write_text(report.summary_rst(summary), smk.output.page)

@@ -15,6 +15,7 @@ from enclab.filters import (
     h2_norm_sq,
     h2_norm_sq_closed_form,
     impulse_response,
+    lag_seconds,
     l1_norm,
     settle_samples,
     state_space,
@@ -356,3 +357,21 @@ def test_norm_tolerances_validated():
         settle_samples(DerivativeFilter(1, 1, 50.0), FS, tol=0.0)
     with pytest.raises(ValueError, match="n_samples must be"):
         impulse_response(DerivativeFilter(1, 1, 50.0), FS, n_samples=0)
+
+
+@pytest.mark.parametrize("disc", DISCRETIZATIONS)
+@pytest.mark.parametrize("d, n, fc", [(1, 1, 50.0), (2, 3, 25.0), (1, 2, 200.0), (0, 1, 100.0)])
+def test_lag_is_the_low_frequency_group_delay(disc, d, n, fc):
+    filt = DerivativeFilter(d, n, fc, disc)
+    # Closed forms: a back difference delays by half a sample; the exponential stage (pole
+    # p = exp(-w0 T)) by p/(1-p) = 1/(exp(w0 T) - 1) samples; the bilinear stage by
+    # 1/2 + p/(1-p) with p = (2 - w0 T)/(2 + w0 T), i.e. exactly 1/(w0 T) samples (= 1/w0).
+    w0T = 2 * np.pi * fc / FS
+    stage = 1 / np.expm1(w0T) if disc == "exponential" else 1 / w0T
+    assert lag_seconds(filt, FS) == pytest.approx((0.5 * d + n * stage) / FS, rel=1e-12)
+    # Independent: scipy's numerical group delay of the expanded transfer function at
+    # w = 2 pi 1e-4 rad/sample, where the delay differs from its DC value by a relative
+    # O((w / w0 T)^2) < 2e-5 and the d-fold zero at DC still leaves ~1e-8 of the numerator.
+    b, a = transfer_function(filt, FS)
+    _, delay = scipy.signal.group_delay((b, a), w=[2 * np.pi * 1e-4])
+    assert lag_seconds(filt, FS) == pytest.approx(delay[0] / FS, rel=1e-4)

@@ -83,6 +83,28 @@ def test_run_summary_rejects_failures_of_completed_logs():
         report.run_summary([_quant_summary("a")], ["a"], {"a": {"stage": "x", "error": "y"}})
 
 
+def test_run_summary_design_headline():
+    design = {"budget": [{"order": 1, "axes": ["x"], "std": 0.01, "worst": 0.05}],
+              "chosen": {"resolution": {"q1": 4096, "q2": 8192},
+                         "filters": [{"label": "d1 n2 fc40 tustin joint"}],
+                         "cost": 35.0, "lag_s": 0.0079, "margin": 0.124},
+              "check": {"trajectories": 200, "exact_design": {"pass_rate": 1.0},
+                        "table2_design": {"pass_rate": 0.485}}}
+    run = report.run_summary([_quant_summary("a")], ["a"], {}, design=design)
+    block = run["analyses"]["design"]
+    assert block["chosen"]["resolution"] == {"q1": 4096, "q2": 8192}
+    assert block["pass_rate"] == {"exact_design": 1.0, "table2_design": 0.485}
+    text = report.summary_text(run)
+    assert "velocity std <= 0.01 and worst <= 0.05" in text
+    assert "q1 4096, q2 8192; d1 n2 fc40 tustin joint; cost 35, lag 7.9 ms, margin 12.4 %" in text
+    assert "chosen design within budget in 100.0 %, PQN/Table II design within budget in 48.5 %" in text
+    infeasible = report.run_summary([_quant_summary("a")], ["a"], {},
+                                    design={**design, "chosen": None, "check": {},
+                                            "message": "no design meets the budget"})
+    assert "no design meets the budget" in report.summary_text(infeasible)
+    assert report.run_summary([_quant_summary("a")], ["a"], {})["analyses"]["design"] is None
+
+
 def test_summary_page_renders_through_the_report_template():
     # The report renders the page with Jinja, then docutils: markup in messages stays text.
     from docutils.core import publish_parts

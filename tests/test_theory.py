@@ -19,6 +19,9 @@ from enclab.quantize import quantize, requantize_counts
 from enclab.theory import (
     QuantizerErrorModel,
     exact_joint_autocovariance,
+    exact_operational_autocovariance,
+    sinusoid_autocovariance,
+    sinusoid_run_autocovariance,
     exact_mean_joint,
     exact_std_joint,
     exact_std_joint_architecture,
@@ -468,3 +471,183 @@ def test_trajectory_derivative_bounds_hold(phantom_run):
     y_joint = np.einsum("kji,ki->kj", device.jacobian(measured), phi_hat) - np.einsum("kji,ki->kj", J, phi)
     bound_joint = worst_case_trajectory_derivative_joint(J, H, phi, h, STEP / 2, device.l1 + device.l2)
     assert np.all(np.abs(y_joint) <= bound_joint)
+
+
+# ------------------------------------------- exact model, pooled to 0.3 % for every family
+# Every (d, n, discretization) family at the paper's 50 Hz cutoff.
+FAMILIES = [DerivativeFilter(d, n, 50.0, disc) for d in (1, 2) for n in (1, 2, 3)
+            for disc in ("exponential", "bilinear")]
+# A model error of this size in a std must make the pooled tests fail.
+DETECT = 0.003
+
+
+def systematic_offsets(rng, runs, step):
+    """``runs`` sub-step centres evenly spaced over one step with one random offset: each is
+    uniform on the step, so their mean of any statistic is unbiased for the grid-phase
+    average the exact model predicts, with far less scatter than independent centres (one
+    run's derivative-noise std moves with its centre by up to +-10 %, because a constant
+    amplitude turns around at the same place on the grid in every cycle)."""
+    return ((np.arange(runs) + rng.uniform()) / runs - 0.5) * step
+
+
+def assert_pooled_within(per_trajectory, labels):
+    """``per_trajectory``: (K, filters) ratios measured/model std, one per independent
+    trajectory (each pooled over its centres). Trajectories are independent, so the spread
+    over them gives the standard error of the mean ratio. Accepted: |mean - 1| <= DETECT/2,
+    with 3 se <= DETECT/2. A model off by DETECT (0.3 %) passes only if the pooled estimate
+    errs by more than DETECT/2 >= 3 se towards it (probability < 0.14 %); a correct model
+    fails only by an error beyond 3 se either way (< 0.3 %)."""
+    mean = per_trajectory.mean(axis=0)
+    se = per_trajectory.std(axis=0, ddof=1) / math.sqrt(per_trajectory.shape[0])
+    assert np.all(3 * se <= DETECT / 2), dict(zip(labels, se.round(6)))
+    assert np.all(np.abs(mean - 1) <= DETECT / 2), dict(zip(labels, (mean - 1).round(5)))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("truth_step", [None, TRUTH_STEP])
+def test_exact_model_pooled_to_0p3_percent_every_family_joint(truth_step):
+    # One joint, Section IV motion (3 deg, 5 +- 0.1 Hz, 1 kHz), 6 trajectories x 64 centres of
+    # 10 s, continuous truth (the design setting) or a 0.125 mrad truth re-quantized 8x (the
+    # embedded Phantom logs). A continuous truth's per-run ratio jumps where a turning point
+    # crosses a threshold, so evenly spaced centres need to be dense (64) to average it.
+    rng = np.random.default_rng(70)
+    n_traj, n_centres, n_samples = 6, 64, 10_000
+    model = QuantizerErrorModel(STEP, truth_step=truth_step)
+    impulses = [impulse_response(f, FS, tol=1e-12) for f in FAMILIES]
+    r_hs = [impulse_autocorrelation(h) for h in impulses]
+    settles = [settle_samples(f, FS, tol=1e-12) for f in FAMILIES]
+    max_lag = max(r.size for r in r_hs) - 1
+    t = np.arange(n_samples) / FS
+    ratios = []
+    for _ in range(n_traj):
+        base = AMP * np.sin(2 * np.pi * rng.uniform(4.9, 5.1) * t + rng.uniform(0, 2 * np.pi))
+        measured, predicted = np.zeros(len(FAMILIES)), np.zeros(len(FAMILIES))
+        for offset in systematic_offsets(rng, n_centres, STEP):
+            theta = base + offset
+            if truth_step is None:
+                truth, err = theta, error_of(theta, STEP)
+            else:
+                fine = quantize(theta, truth_step)
+                truth, err = fine * truth_step, (8 * requantize_counts(fine, 8) - fine) * truth_step
+            c = exact_joint_autocovariance(truth, model, max_lag)
+            for q, (filt, r_h, skip) in enumerate(zip(FAMILIES, r_hs, settles)):
+                measured[q] += np.var(apply(filt, err, FS)[skip:])
+                predicted[q] += r_h[0] * c[0] + 2 * np.dot(r_h[1:], c[1:r_h.size])
+        ratios.append(np.sqrt(measured / predicted))
+    assert_pooled_within(np.array(ratios), [f.label() for f in FAMILIES])
+
+
+CENTRE0 = np.zeros(3)
+
+
+@pytest.mark.slow
+def test_exact_model_pooled_to_0p3_percent_every_family_phantom():
+    # Phantom Premium 1.5 about (0, 0.3, 0.3) rad, truth at 0.125 mrad re-quantized 8x (as the
+    # embedded logs), every family filtered in operational space (Fig. 2A) and the velocity
+    # families in joint space (Fig. 2B); 8 trajectories x 16 runs of 4 s, each joint's centres
+    # spread evenly over one step in an independent random order. The prediction is computed
+    # per run (the Jacobian weighting) and pooled as a variance.
+    rng = np.random.default_rng(71)
+    device = PhantomPremium15()
+    n_traj, n_centres, n_samples = 8, 16, 4000
+    model = QuantizerErrorModel(STEP, truth_step=TRUTH_STEP)
+    impulses = [impulse_response(f, FS, tol=1e-12) for f in FAMILIES]
+    r_hs = [impulse_autocorrelation(h) for h in impulses]
+    settles = [settle_samples(f, FS, tol=1e-12) for f in FAMILIES]
+    max_lag = max(r.size for r in r_hs) - 1
+    velocity = [q for q, f in enumerate(FAMILIES) if f.d == 1]
+    t = np.arange(n_samples)[:, None] / FS
+    ratios = []
+    for _ in range(n_traj):
+        base = CENTRE0 + AMP * np.sin(
+            2 * np.pi * (np.array(PHANTOM_FREQS) + rng.uniform(-0.02, 0.02, 3)) * t
+            + rng.uniform(0, 2 * np.pi, 3))
+        offsets = np.stack([rng.permutation(systematic_offsets(rng, n_centres, STEP))
+                            for _ in range(3)], axis=1)
+        meas = np.zeros((len(FAMILIES) + len(velocity), 3))
+        pred = np.zeros_like(meas)
+        for offset in offsets:
+            fine = quantize(base + offset, TRUTH_STEP)
+            truth = fine * TRUTH_STEP
+            measured = 8 * requantize_counts(fine, 8) * TRUTH_STEP
+            J, H = device.jacobian(truth), device.hessian(truth)
+            x_err = device.forward(measured) - device.forward(truth)
+            c_x = exact_operational_autocovariance(truth, J, model, max_lag)
+            mean_x = J @ np.full(3, model.mean)  # the tie-rule mean, J-weighted
+            for q, (filt, r_h, skip) in enumerate(zip(FAMILIES, r_hs, settles)):
+                meas[q] += np.var(apply(filt, x_err, FS)[skip:], axis=0)
+                pred[q] += (r_h[0] * c_x[:, 0] + 2 * c_x[:, 1:r_h.size] @ r_h[1:]
+                            + np.var(apply(filt, mean_x, FS)[skip:], axis=0))
+            J_hat = device.jacobian(measured)
+            phis = [apply(FAMILIES[q], truth, FS) for q in velocity]
+            pred[len(FAMILIES):] += exact_std_joint_architecture(
+                truth, J, H, np.array(phis), model, [impulses[q] for q in velocity]) ** 2
+            for row, q in enumerate(velocity, start=len(FAMILIES)):
+                phi_err = apply(FAMILIES[q], measured - truth, FS)
+                y = (np.einsum("kji,ki->kj", J_hat - J, phis[row - len(FAMILIES)])
+                     + np.einsum("kji,ki->kj", J_hat, phi_err))
+                meas[row] += np.var(y[settles[q]:], axis=0)
+        ratios.append(np.sqrt(meas / pred).ravel())
+    labels = [f"{f.label()}_{arch}_{axis}" for f, arch in
+              [(f, "operational") for f in FAMILIES] + [(FAMILIES[q], "joint") for q in velocity]
+              for axis in "xyz"]
+    assert_pooled_within(np.array(ratios), labels)
+
+
+# ------------------------------------------------------------ exact model of a sinusoid
+def test_sinusoid_autocovariance_matches_bessel_series_and_a_long_run():
+    # Independent method 1: the Fourier series of b and E cos(z cos psi) = J0(z) give
+    # C(m) = step^2/(2 pi^2) sum_k J0(2 pi k x)/k^2, x = a_m/step; truncated at K = 20000 its
+    # tail is below sum_{k>K} 1/k^2 < 1/K, i.e. < 6e-4 of C(0) = step^2/12.
+    from scipy.special import j0
+
+    model = QuantizerErrorModel(STEP, 0.3)  # the offset does not enter a covariance
+    f = 5.03
+    c = sinusoid_autocovariance(AMP, f, FS, model, 60)
+    k = np.arange(1, 20_001)
+    x = 2 * AMP * np.abs(np.sin(np.pi * f * np.arange(61) / FS)) / STEP
+    series = STEP**2 / (2 * np.pi**2) * (j0(2 * np.pi * np.outer(x, k)) / k**2).sum(axis=1)
+    np.testing.assert_allclose(c, series, rtol=0, atol=6e-4 * STEP**2 / 12)
+    assert c[0] == pytest.approx(STEP**2 / 12, rel=1e-12)
+    # Independent method 2: the trajectory average over a 400 s run (2000 periods, a random
+    # sub-step centre); a finite run departs from the equidistributed phase by O(1/periods).
+    t = np.arange(400_000) / FS
+    theta = 0.37 * STEP + AMP * np.sin(2 * np.pi * f * t + 0.4)
+    np.testing.assert_allclose(exact_joint_autocovariance(theta, model, 60), c, rtol=0,
+                               atol=1e-3 * STEP**2 / 12)
+
+
+def test_sinusoid_run_autocovariance_is_one_run_and_averages_to_the_model():
+    model = QuantizerErrorModel(STEP)
+    f, centre = 5.03, 0.3 * STEP
+    # One long run at a fixed sub-step centre (3000 periods): its own error autocovariance.
+    t = np.arange(600_000) / FS
+    theta = centre + AMP * np.sin(2 * np.pi * f * t + 0.4)
+    err = error_of(theta, STEP)
+    dev = err - err.mean()
+    brute = [np.mean(dev[m:] * dev[: dev.size - m]) for m in range(6)]
+    frac = (centre / STEP + model.offset_frac) % 1.0
+    cov, mean = sinusoid_run_autocovariance(AMP, f, FS, model, 5, frac, points_per_step=256)
+    # Quadrature and the finite run each err by ~1e-4 of C(0) (measured 4e-5).
+    np.testing.assert_allclose(cov, brute, rtol=0, atol=1e-3 * STEP**2 / 12)
+    assert mean == pytest.approx(err.mean(), abs=1e-3 * STEP)
+    # This run is one draw: its derivative noise differs from the grid-phase average.
+    assert abs(cov[1] - sinusoid_autocovariance(AMP, f, FS, model, 5)[1]) > 0.005 * STEP**2 / 12
+    # Averaged over the grid phase it is the closed form (lags up to 40 samples, where the
+    # frequency's rounding to a whole grid shift, < 1e-5 relative, does not matter).
+    fracs = (np.arange(256) + 0.5) / 256
+    cov, _ = sinusoid_run_autocovariance(AMP, f, FS, model, 40, fracs)
+    np.testing.assert_allclose(cov.mean(axis=0), sinusoid_autocovariance(AMP, f, FS, model, 40),
+                               rtol=0, atol=2e-3 * STEP**2 / 12)
+
+
+def test_sinusoid_models_reject_bad_arguments():
+    model = QuantizerErrorModel(STEP)
+    with pytest.raises(ValueError, match="continuous truth"):
+        sinusoid_autocovariance(AMP, 5.0, FS, QuantizerErrorModel(STEP, truth_step=TRUTH_STEP), 3)
+    with pytest.raises(ValueError, match="Nyquist"):
+        sinusoid_autocovariance(AMP, 600.0, FS, model, 3)
+    with pytest.raises(ValueError, match="amplitude"):
+        sinusoid_autocovariance(0.0, 5.0, FS, model, 3)
+    with pytest.raises(ValueError, match="centre_frac"):
+        sinusoid_run_autocovariance(AMP, 5.0, FS, model, 3, 1.0)

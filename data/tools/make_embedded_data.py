@@ -31,13 +31,24 @@ from enclab.simulate import fig6_configurations_deg, phantom_protocol_run
 ROOT = Path(__file__).resolve().parents[2]
 TRUTH_STEP = 1.25e-4
 # A lab centres the arm to within about a millimetre-radian and the encoder's zero is arbitrary,
-# so the sub-step position of the motion on the coarse grid is random from run to run. Drawing it
-# uniformly over one 1 mrad step matters: with a grid-aligned centre every run turns around at
-# the same place on the grid, the dwell at the turning points is the same in every run, and the
-# derivative-noise std of every run is about 1.5 % below the grid-offset average the exact model
-# predicts (workflow/benchmarks/grid_alignment.py, 40 runs, d1 n1 fc200: 0.9825 +- 0.0003 aligned,
-# 0.9992 +- 0.0016 random).
+# so the sub-step position of the motion on the coarse grid differs from run to run. It matters:
+# with a constant amplitude every cycle turns around at the same place on the grid, and one run's
+# derivative-noise std depends on that place by -2.5 % to +1.4 % (d1 n1 fc200) and by -9 % to
+# +11 % (d1 n3 fc25); the exact model predicts the average over the sub-step position. A repeat
+# group therefore spreads each joint's runs evenly over one coarse step (one random offset per
+# joint, runs in a random order), so that its pooled runs estimate that average rather than a
+# random draw of it: over 20 runs the pooled ratio scatters by 0.05 % (d1 n1) and 0.5 % (n3
+# fc25, 1 sd) instead of 0.25 % and 1.1 % with independent uniform centres
+# (workflow/benchmarks/grid_alignment.py, docs/quantization-error.md).
 CENTRE_JITTER = 1e-3
+
+
+def systematic_centres(rng: np.random.Generator, runs: int, joints: int, width: float) -> np.ndarray:
+    """``(runs, joints)`` offsets in ``[-width/2, width/2)``, evenly spaced ``width/runs`` apart
+    for each joint with one uniform random offset per joint, in a random order over the runs
+    (independently per joint), so every offset is marginally uniform."""
+    order = np.stack([rng.permutation(runs) for _ in range(joints)], axis=1)
+    return ((order + rng.uniform(size=joints)) / runs - 0.5) * width
 
 
 def phantom_entries(out_dir: Path, seed: int, fig6_repeats: int, fig7_repeats: int,
@@ -48,9 +59,11 @@ def phantom_entries(out_dir: Path, seed: int, fig6_repeats: int, fig7_repeats: i
     for c, (centre_deg, stream) in enumerate(zip(configs, streams)):
         repeats = fig7_repeats if c == 0 else fig6_repeats
         group = f"phantom_c{c:02d}"
-        for r, run_seed in enumerate(stream.spawn(repeats), start=1):
+        run_seeds = stream.spawn(repeats)
+        centres = systematic_centres(np.random.default_rng(stream.spawn(1)[0]), repeats, 3,
+                                     CENTRE_JITTER)
+        for r, (run_seed, jitter) in enumerate(zip(run_seeds, centres), start=1):
             rng = np.random.default_rng(run_seed)
-            jitter = rng.uniform(-CENTRE_JITTER / 2, CENTRE_JITTER / 2, size=3)
             log, truth = phantom_protocol_run(np.deg2rad(centre_deg) + jitter, rng)
             name = f"{group}_r{r:02d}"
             io.write_table(log, out_dir / f"{name}.parquet")

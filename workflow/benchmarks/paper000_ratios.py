@@ -8,7 +8,10 @@ prints, and writes under ``results/benchmarks/``:
 - ``fig7_derivatives.csv``: for the Fig. 7 group (config ``figures.fig7_group``), per
   (d, n, discretization, architecture), the min/max over cutoffs and signals of both ratios,
   the worst interval ends, and how many rows miss 1 +- tol (point estimate) and how many of
-  those have an interval that still reaches the band (statistically consistent with it).
+  those have an interval that still reaches the band (statistically consistent with it);
+- ``exact_exclusions.csv`` (appended, with ``date``, ``machine``, ``command``): per repeat group,
+  how many pooled rows have a measured/exact interval that excludes 1, and the largest
+  |measured/exact - 1| over all rows and over rows whose interval is narrower than +-1 %.
 
 Usage (after ``make run``)::
 
@@ -17,6 +20,9 @@ Usage (after ``make run``)::
 from __future__ import annotations
 
 import argparse
+import datetime
+import platform
+import sys
 from pathlib import Path
 
 import pandas as pd
@@ -43,6 +49,19 @@ def fig7_table(pooled: pd.DataFrame, group: str, tol: float) -> pd.DataFrame:
             .reset_index())
 
 
+def exclusions(pooled: pd.DataFrame) -> pd.DataFrame:
+    """Per group: rows, rows whose measured/exact interval excludes 1, the largest deviations."""
+    frame = pooled.dropna(subset=["ratio_exact", "ratio_exact_lo", "ratio_exact_hi"]).copy()
+    frame["excludes"] = (frame["ratio_exact_lo"] > 1) | (frame["ratio_exact_hi"] < 1)
+    frame["dev"] = (frame["ratio_exact"] - 1).abs()
+    frame["narrow"] = (frame["ratio_exact_hi"] - frame["ratio_exact_lo"]) < 0.02
+    out = frame.groupby("group").agg(n_runs=("n_runs", "max"), rows=("dev", "size"),
+                                     excluded=("excludes", "sum"), max_dev=("dev", "max"))
+    out["excluded_fraction"] = out["excluded"] / out["rows"]
+    out["max_dev_narrow"] = frame[frame["narrow"]].groupby("group")["dev"].max()
+    return out.reset_index()
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--pooled", default="results/batch/pooled.csv")
@@ -57,12 +76,20 @@ def main(argv=None) -> None:
     f6, f7 = fig6_table(pooled), fig7_table(pooled, group, args.tol)
     f6.to_csv(out / "fig6_position.csv", index=False)
     f7.to_csv(out / "fig7_derivatives.csv", index=False)
+    excl = exclusions(pooled)
+    stamp = {"date": datetime.date.today().isoformat(), "machine": platform.node(),
+             "command": " ".join([Path(sys.argv[0]).name] + (argv if argv is not None else sys.argv[1:]))}
+    excl_out = pd.concat([pd.DataFrame([stamp] * len(excl)), excl], axis=1)
+    path = out / "exact_exclusions.csv"
+    excl_out.to_csv(path, mode="a", header=not path.exists(), index=False)
     with pd.option_context("display.width", 200, "display.max_rows", 500,
                            "display.max_columns", 30):
         print("Fig. 6 position std ratios (pooled runs, 95 % intervals)")
         print(f6.round(4).to_string(index=False))
         print(f"\nposition: measured/PQN {f6.ratio_pqn.min():.4f}..{f6.ratio_pqn.max():.4f}, "
               f"measured/exact {f6.ratio_exact.min():.4f}..{f6.ratio_exact.max():.4f}")
+        print("\nRows whose 95 % interval of measured/exact excludes 1, per repeat group")
+        print(excl.round(4).to_string(index=False))
         print(f"\nFig. 7 derivative std ratios, group {group}")
         print(f7.round(4).to_string(index=False))
         fc = pooled[(pooled["group"] == group) & (pooled["order"] > 0)]

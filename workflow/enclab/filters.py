@@ -49,6 +49,7 @@ __all__ = [
     "h2_norm_sq_closed_form",
     "l1_norm",
     "frequency_response",
+    "lag_seconds",
 ]
 
 DISCRETIZATIONS = ("exponential", "bilinear")
@@ -578,3 +579,31 @@ def frequency_response(filt: DerivativeFilter, fs_hz: float, freqs_hz) -> np.nda
         raise ValueError("freqs_hz must be finite")
     z_inv = np.exp(-2j * np.pi * freqs / fs_hz)
     return np.polynomial.polynomial.polyval(z_inv, b) / np.polynomial.polynomial.polyval(z_inv, a)
+
+
+def lag_seconds(filt: DerivativeFilter, fs_hz: float) -> float:
+    """Group delay at low frequency (s): the lag of the estimate behind the true derivative.
+
+    Each back difference ``(1 - z^-1)/T`` delays by exactly half a sample at every frequency
+    (``1 - e^{-jwT} = 2j sin(wT/2) e^{-jwT/2}``); a low-pass stage ``B(z)/A(z)`` with
+    ``B(1), A(1) != 0`` has the DC group delay ``sum k b_k / sum b_k - sum k a_k / sum a_k``
+    samples: ``p / (1 - p)`` for exponential smoothing with pole ``p`` and
+    ``1/2 + p / (1 - p)`` for the bilinear stage. The cascade adds them:
+    ``(d/2 + n tau_stage) / fs``.
+
+    Parameters
+    ----------
+    filt : DerivativeFilter
+    fs_hz : float
+
+    Returns
+    -------
+    float
+        Seconds; ``d/(2 fs) + n tau_stage / fs``. For ``fc << fs`` this tends to
+        ``n / (2 pi fc)``, the analog stage's delay ``1/w0``.
+    """
+    _check_filter(filt)
+    fs_hz = _check_fs(filt, fs_hz)
+    b, a = _stage(filt, fs_hz)
+    tau = float(np.dot(np.arange(b.size), b) / np.sum(b) - np.dot(np.arange(a.size), a) / np.sum(a))
+    return (0.5 * filt.d + filt.n * tau) / fs_hz

@@ -104,9 +104,27 @@ def _residuals(summaries: Sequence[Mapping]) -> dict | None:
             "rows": rows}
 
 
+def _design(block: Mapping | None) -> dict | None:
+    if not block:
+        return None
+    chosen = block.get("chosen")
+    out = {"budget": [dict(b) for b in block.get("budget") or []], "chosen": None,
+           "message": block.get("message")}
+    if chosen:
+        out["chosen"] = {"resolution": dict(chosen["resolution"]),
+                         "filters": [f["label"] for f in chosen.get("filters") or []],
+                         "cost": _num(chosen.get("cost")), "lag_s": _num(chosen.get("lag_s")),
+                         "margin": _num(chosen.get("margin"))}
+    check = block.get("check") or {}
+    out["pass_rate"] = {kind: _num(check[kind]["pass_rate"])
+                        for kind in ("exact_design", "table2_design") if kind in check}
+    out["trajectories"] = check.get("trajectories")
+    return out
+
+
 def run_summary(summaries: Sequence[Mapping], log_ids: Sequence[str],
                 failures: Mapping[str, Mapping], *, ratios: pd.DataFrame | None = None,
-                violations: pd.DataFrame | None = None,
+                violations: pd.DataFrame | None = None, design: Mapping | None = None,
                 written: Mapping[str, int] | None = None) -> dict:
     """Condense a run into what ran, the headline numbers, failures and warnings.
 
@@ -120,14 +138,16 @@ def run_summary(summaries: Sequence[Mapping], log_ids: Sequence[str],
         ``{log_id: failure_of(...)}`` of the logs that did not complete.
     ratios, violations : DataFrame, optional
         ``results/batch/ratios.csv`` and ``results/batch/bound_violations.csv``.
+    design : mapping, optional
+        The ``design`` block of ``results/design/design.json``.
     written : mapping, optional
         Counts of the files written, by kind (``{"summaries": 70, ...}``).
 
     Returns
     -------
     dict
-        ``logs`` {total, completed, failed}, ``analyses`` {quantization, lrde, residuals}
-        (None for an analysis that did not run), ``failed`` [{log_id, stage, error}],
+        ``logs`` {total, completed, failed}, ``analyses`` {quantization, lrde, residuals,
+        design} (None for an analysis that did not run), ``failed`` [{log_id, stage, error}],
         ``warnings`` [{log_id, warning}], ``written``.
     """
     completed = sorted(s["log_id"] for s in summaries)
@@ -142,7 +162,8 @@ def run_summary(summaries: Sequence[Mapping], log_ids: Sequence[str],
         "logs": {"total": len(set(log_ids) | set(completed)), "completed": len(completed),
                  "failed": len(failed)},
         "analyses": {"quantization": _quantization(summaries, ratios, violations),
-                     "lrde": _lrde(summaries), "residuals": _residuals(summaries)},
+                     "lrde": _lrde(summaries), "residuals": _residuals(summaries),
+                     "design": _design(design)},
         "failed": failed,
         "warnings": warnings,
         "written": dict(written or {}),
@@ -201,7 +222,31 @@ def _headlines(run: Mapping) -> list[tuple[str, list[str]]]:
             lines.append(f"{r['log_id']}/{r['measured']}: {r['verdict']}{ratio}; {effects}")
         out.append((f"residuals ({_count(res['channels'], 'channel')}, {res['explained']} explained)",
                     lines))
+    design = run["analyses"].get("design")
+    if design:
+        budget = "; ".join(_budget_text(b) for b in design["budget"])
+        chosen = design["chosen"]
+        if chosen is None:
+            lines = [f"budget {budget}: {design.get('message') or 'no design meets it'}"]
+        else:
+            resolution = ", ".join(f"{k} {v}" for k, v in chosen["resolution"].items())
+            lines = [f"budget {budget}",
+                     f"chosen: {resolution}; {', '.join(chosen['filters']) or 'no filter'}; "
+                     f"cost {chosen['cost']:g}, lag {1e3 * chosen['lag_s']:.3g} ms, "
+                     f"margin {100 * chosen['margin']:.3g} %"]
+        rates = design.get("pass_rate") or {}
+        if rates:
+            names = {"exact_design": "chosen design", "table2_design": "PQN/Table II design"}
+            lines.append(f"simulated on {design.get('trajectories')} trajectories: " + ", ".join(
+                f"{names[k]} within budget in {100 * v:.1f} %" for k, v in rates.items()))
+        out.append(("design", lines))
     return out
+
+
+def _budget_text(item: Mapping) -> str:
+    order = _ORDER_NAMES.get(int(item["order"]), f"order {item['order']}")
+    limits = [f"{key} <= {item[key]:g}" for key in ("std", "worst") if item.get(key) is not None]
+    return f"{order} {' and '.join(limits)}"
 
 
 def _written_line(run: Mapping) -> str:

@@ -22,11 +22,16 @@ Three layers
    Parseval); eq. (47) has the index ``i`` for ``j``; Table II bounds ``phi~_i`` by
    ``|theta_i|max`` where ``|theta~_i|max`` is meant.
 2. **Exact model** of the error of a quantized *sampled trajectory* (:class:`QuantizerErrorModel`
-   and ``exact_*``). PQN assumes the error is white; at the paper's own conditions (1 kHz,
-   3 deg at 5 Hz, 1 mrad, i.e. at most ~1.6 steps per sample) consecutive errors are
-   correlated and PQN misses the derivative-noise standard deviation by about 1 %
-   (exponential-smoothing filter) to 7 % (bilinear filter) at 50 Hz; the exact model agrees
-   with simulation to about 0.1 %.
+   and ``exact_*``; ``sinusoid_*`` for a sinusoid without samples). PQN assumes the error is
+   white; at the paper's own conditions (1 kHz, 3 deg at 5 Hz, 1 mrad, i.e. at most ~1.6
+   steps per sample) consecutive errors are correlated and PQN misses the derivative-noise
+   standard deviation by about 1 % (exponential-smoothing filter) to 7 % (bilinear filter) at
+   50 Hz. The model is the average over the sub-step position of the motion (its grid
+   phase); pooled over runs whose centres cover one step it agrees with simulation to 0.02 %
+   for every filter family (tests/test_theory.py resolves 0.3 %). One run of a
+   constant-amplitude motion turns around at the same place on the grid in every cycle, so
+   its own derivative noise departs from the average by up to a few percent (fast filters)
+   to +-10 % (n = 3 at 25 Hz): :func:`sinusoid_run_autocovariance` gives it per grid phase.
 3. **Trajectory worst case**: the centre-configuration bound ``1/2 |J(theta0)| step`` is
    exceeded when the Jacobian changes along the motion; ``worst_case_trajectory_*`` give
    bounds that hold at every sample (Taylor's theorem with an explicit remainder).
@@ -91,6 +96,9 @@ __all__ = [
     "pqn_derivative_std_joint",
     "pqn_derivative_cov_operational",
     "exact_joint_autocovariance",
+    "exact_operational_autocovariance",
+    "sinusoid_autocovariance",
+    "sinusoid_run_autocovariance",
     "exact_std_joint",
     "exact_mean_joint",
     "exact_std_operational",
@@ -241,9 +249,9 @@ class QuantizerErrorModel:
             return self.step**2 * (1.0 / 12.0 - 0.5 * u * (1.0 - u))
         fine = delta / self.truth_step
         whole = np.rint(fine)
-        off_grid = np.abs(fine - whole) > _GRID_TOL
-        if np.any(off_grid):
-            bad = float(delta.ravel()[np.flatnonzero(off_grid.ravel())[0]])
+        miss = np.abs(fine - whole)
+        if miss.size and float(miss.max()) > _GRID_TOL:
+            bad = float(delta.ravel()[np.flatnonzero(miss.ravel() > _GRID_TOL)[0]])
             raise ValueError(
                 f"delta must be whole multiples of truth_step={self.truth_step!r} for a "
                 f"quantized truth, got delta={bad!r}"
@@ -560,6 +568,171 @@ def exact_mean_joint(model: QuantizerErrorModel, h=None) -> float:
     return model.mean if h is None else model.mean * float(np.sum(_impulse(h)))
 
 
+# ----------------------------------------------------------------------------- sinusoids
+
+
+def _sinusoid_args(amplitude, freq_hz, fs_hz, max_lag):
+    amplitude = _positive_float("amplitude", amplitude)
+    freq_hz = _positive_float("freq_hz", freq_hz)
+    fs_hz = _positive_float("fs_hz", fs_hz)
+    if freq_hz >= fs_hz / 2:
+        raise ValueError(f"freq_hz={freq_hz!r} must be below the Nyquist frequency fs_hz/2={fs_hz / 2!r}")
+    if isinstance(max_lag, bool) or not isinstance(max_lag, numbers.Integral) or max_lag < 0:
+        raise ValueError(f"max_lag must be a non-negative integer, got max_lag={max_lag!r}")
+    return amplitude, freq_hz, fs_hz, int(max_lag)
+
+
+def _arcsine_mean_b2(x: np.ndarray) -> np.ndarray:
+    """``E[b(x cos psi)]`` for ``psi ~ U(0, 2 pi)``, ``b(y) = 1/12 - frac(y)(1 - frac(y))/2``.
+
+    ``u = x cos psi`` has the arcsine density ``1/(pi sqrt(x^2 - u^2))`` on ``[-x, x]`` and
+    ``b`` is even, so the mean is ``(2/pi) int_0^x b(u) / sqrt(x^2 - u^2) du``. On each unit
+    band ``[k, k+1]`` ``b`` is the quadratic ``1/12 - (u-k)/2 + (u-k)^2/2`` and the integral
+    is closed form with ``S0 = arcsin(u/x)``, ``S1 = -sqrt(x^2 - u^2)`` and
+    ``S2 = x^2/2 S0 + u/2 S1``, the antiderivatives of ``u^p / sqrt(x^2 - u^2)``.
+    """
+    x = np.abs(np.asarray(x, dtype=np.float64))
+    out = np.full(x.shape, 1.0 / 12.0)
+    pos = x > 0
+    if not np.any(pos):
+        return out
+    xv = x[pos]
+    n_bands = int(np.ceil(xv.max()))
+    k = np.arange(n_bands, dtype=np.float64)[None, :]
+    lo = np.minimum(k, xv[:, None])
+    hi = np.minimum(k + 1.0, xv[:, None])
+
+    def antiderivatives(u):
+        ratio = np.clip(u / xv[:, None], 0.0, 1.0)
+        s0 = np.arcsin(ratio)
+        s1 = -xv[:, None] * np.sqrt(np.maximum(1.0 - ratio * ratio, 0.0))
+        s2 = 0.5 * xv[:, None] ** 2 * s0 + 0.5 * u * s1
+        return s0, s1, s2
+
+    a_lo, a_hi = antiderivatives(lo), antiderivatives(hi)
+    d0, d1, d2 = (h_ - l_ for h_, l_ in zip(a_hi, a_lo))
+    # Moments about the band's left end: int (u-k)^p du / sqrt(x^2 - u^2), p = 0, 1, 2.
+    m0 = d0
+    m1 = d1 - k * d0
+    m2 = d2 - 2.0 * k * d1 + k * k * d0
+    bands = m0 / 12.0 - 0.5 * m1 + 0.5 * m2
+    out[pos] = (2.0 / np.pi) * np.sum(bands, axis=1)
+    return out
+
+
+def sinusoid_autocovariance(amplitude, freq_hz, fs_hz, model: QuantizerErrorModel, max_lag: int) -> np.ndarray:
+    """Exact error autocovariance of a sampled sinusoid, averaged over its grid phase.
+
+    The motion ``theta(k) = c + A sin(2 pi f k / fs + phi)`` read by a quantizer with a
+    continuous truth: over a long run the motion phase at the samples is equidistributed, so
+    the increment at lag ``m`` is ``a_m cos psi`` with ``psi`` uniform and
+    ``a_m = 2 A |sin(pi f m / fs)|``, and (averaging over the sub-step position ``c mod step``
+    as in :meth:`QuantizerErrorModel.autocovariance`)
+    ``C(m) = step^2 E[b(a_m cos(psi) / step)]`` with ``b(y) = 1/12 - frac(y)(1-frac(y))/2``,
+    evaluated in closed form band by band. It is what :func:`exact_joint_autocovariance`
+    computes from the samples of a long run, without the samples.
+
+    Parameters
+    ----------
+    amplitude : float
+        ``A`` (rad or m), > 0.
+    freq_hz, fs_hz : float
+        Motion frequency and sample rate (Hz), ``0 < freq_hz < fs_hz / 2``.
+    model : QuantizerErrorModel
+        Continuous-truth model (``truth_step`` None); its offset does not enter a covariance.
+    max_lag : int
+        Largest lag ``L``.
+
+    Returns
+    -------
+    ndarray, shape (L + 1,)
+
+    Notes
+    -----
+    Equivalently ``C(m) = step^2/(2 pi^2) sum_k J0(2 pi k a_m / step) / k^2`` (the Fourier
+    series of ``b`` and ``E cos(z cos psi) = J0(z)``; Gray 1990), which converges slowly; the
+    band form is exact to rounding (about ``1e-16 x^2`` relative for ``x = a_m/step``).
+    """
+    amplitude, freq_hz, fs_hz, max_lag = _sinusoid_args(amplitude, freq_hz, fs_hz, max_lag)
+    if not isinstance(model, QuantizerErrorModel) or model.truth_step is not None:
+        raise ValueError("model must be a QuantizerErrorModel with a continuous truth (truth_step=None)")
+    m = np.arange(max_lag + 1)
+    a_m = 2.0 * amplitude * np.abs(np.sin(np.pi * freq_hz * m / fs_hz))
+    return model.step**2 * _arcsine_mean_b2(a_m / model.step)
+
+
+def sinusoid_run_autocovariance(amplitude, freq_hz, fs_hz, model: QuantizerErrorModel, max_lag: int,
+                                centre_frac, points_per_step: int = 32):
+    """Error autocovariance of *one* long run of a sampled sinusoid at a given grid phase.
+
+    With a constant amplitude every cycle turns around at the same place on the grid, so the
+    statistics of one run depend on the centre's position within a step, ``centre_frac =
+    frac(c / step + offset_frac)``; :func:`sinusoid_autocovariance` is their average over
+    ``centre_frac``. Over a long run the motion phase at the samples is equidistributed, so
+    the run's error autocovariance (its own mean removed) is the circular autocovariance of
+    the continuous-time error ``g(c + A sin psi)`` over one period, at shifts ``2 pi f m / fs``.
+
+    Parameters
+    ----------
+    amplitude, freq_hz, fs_hz, model, max_lag
+        As in :func:`sinusoid_autocovariance`.
+    centre_frac : float or array_like
+        Grid phase(s) in ``[0, 1)``.
+    points_per_step : int
+        Resolution of the period's quadrature grid in points per step at the fastest point of
+        the motion (the error is piecewise linear with one jump per step; the quadrature's
+        error falls like ``1/points_per_step``).
+
+    Returns
+    -------
+    cov : ndarray, shape (..., L + 1)
+        Per grid phase (leading shape of ``centre_frac``).
+    mean : ndarray, shape (...)
+        The run's mean error.
+
+    Notes
+    -----
+    The period is sampled at ``M`` points (an FFT-friendly length) with ``M f / fs`` an
+    integer ``s`` (the frequency is rounded to ``s fs / M``, a relative change below
+    ``1/(2 M)``), so each lag is a whole shift of the grid and one FFT gives every lag. The largest variance over the grid
+    phase, the quantity the design uses, is stable to 0.1 % from 32 points per step on.
+    """
+    amplitude, freq_hz, fs_hz, max_lag = _sinusoid_args(amplitude, freq_hz, fs_hz, max_lag)
+    if not isinstance(model, QuantizerErrorModel) or model.truth_step is not None:
+        raise ValueError("model must be a QuantizerErrorModel with a continuous truth (truth_step=None)")
+    if isinstance(points_per_step, bool) or not isinstance(points_per_step, numbers.Integral) or points_per_step < 4:
+        raise ValueError(f"points_per_step must be an integer >= 4, got {points_per_step!r}")
+    frac = np.asarray(centre_frac, dtype=np.float64)
+    if not np.all(np.isfinite(frac)) or np.any(frac < 0) or np.any(frac >= 1):
+        raise ValueError("centre_frac must lie in [0, 1)")
+    import scipy.fft  # deferred, as scipy.signal elsewhere
+
+    target = max(points_per_step * 2.0 * np.pi * amplitude / model.step, 4.0 * fs_hz / freq_hz)
+    first = max(1, int(np.ceil(target * freq_hz / fs_hz)))
+    shift, n_points = first, int(round(first * fs_hz / freq_hz))
+    for candidate in range(first, first + 256):  # an FFT-friendly length close to the target
+        length = int(round(candidate * fs_hz / freq_hz))
+        if scipy.fft.next_fast_len(length, real=True) == length:
+            shift, n_points = candidate, length
+            break
+    swing = (amplitude / model.step) * np.sin(2.0 * np.pi * np.arange(n_points) / n_points)
+    lags = (np.arange(max_lag + 1) * shift) % n_points
+    flat = frac.ravel()
+    cov = np.empty((flat.size, max_lag + 1))
+    mean = np.empty(flat.size)
+    per_block = max(1, 2_000_000 // n_points)  # bounded memory for long periods
+    for start in range(0, flat.size, per_block):
+        # Error of step*floor(theta/step + o) with theta/step = frac - o + (A/step) sin psi.
+        y = (flat[start:start + per_block, None] - model.offset_frac) + swing
+        err = model.step * (np.floor(y + model.offset_frac) - y)
+        mean[start:start + per_block] = err.mean(axis=-1)
+        err -= mean[start:start + per_block, None]
+        spec = scipy.fft.rfft(err, axis=-1)
+        circ = scipy.fft.irfft(spec.real**2 + spec.imag**2, n=n_points, axis=-1) / n_points
+        cov[start:start + per_block] = circ[:, lags]
+    return cov.reshape(frac.shape + (max_lag + 1,)), mean.reshape(frac.shape)
+
+
 def _mean_signal_operational(J, models, H, h):
     """Deterministic part of ``x~`` (or ``h * x~``): ``J mean_e + 1/2 tr(H_j (Sigma + mu mu^T))``
     per sample, filtered with ``h`` in 'valid' mode (steady state)."""
@@ -591,6 +764,40 @@ def _check_operational(theta, J, models, H):
         if not np.all(np.isfinite(H)):
             raise ValueError("H must be finite")
     return theta, J, models, H
+
+
+def _operational_autocovariance(theta, J, models, max_lag):
+    n_samples = theta.shape[0]
+    c_x = np.empty((J.shape[1], max_lag + 1))
+    for m, G in _lagged_autocovariances(theta, models, max_lag):
+        c_x[:, m] = np.einsum("kji,ki->j", J[m:] * J[: n_samples - m], G) / (n_samples - m)
+    return c_x
+
+
+def exact_operational_autocovariance(theta, J, models, max_lag: int) -> np.ndarray:
+    """Jacobian-weighted, trajectory-averaged error autocovariance in operational space.
+
+    ``C_x,j(m) = mean_k sum_i J_ji(k) J_ji(k+m) C_i(theta_i(k+m) - theta_i(k))``, the input
+    of every operational-space filter: a filter ``h`` has the output variance
+    ``sum_m r_h(|m|) C_x(|m|)`` (see :func:`exact_std_operational`), so one call serves a
+    whole filter bank.
+
+    Parameters
+    ----------
+    theta : array_like, shape (N, n)
+    J : array_like, shape (N, m, n)
+    models : QuantizerErrorModel or sequence of n
+    max_lag : int
+        Largest lag, ``0 <= max_lag < N``.
+
+    Returns
+    -------
+    ndarray, shape (m, max_lag + 1)
+    """
+    theta, J, models, _ = _check_operational(theta, J, models, None)
+    if isinstance(max_lag, bool) or not isinstance(max_lag, numbers.Integral) or max_lag < 0:
+        raise ValueError(f"max_lag must be a non-negative integer, got max_lag={max_lag!r}")
+    return _operational_autocovariance(theta, J, models, int(max_lag))
 
 
 def exact_std_operational(theta, J, models, h=None, H=None) -> np.ndarray:
@@ -631,10 +838,7 @@ def exact_std_operational(theta, J, models, h=None, H=None) -> np.ndarray:
         var = np.einsum("kji,i->j", J**2, np.array([mdl.variance for mdl in models])) / n_samples
     else:
         r_h = impulse_autocorrelation(h)
-        c_x = np.empty((J.shape[1], r_h.size))
-        for m, G in _lagged_autocovariances(theta, models, r_h.size - 1):
-            c_x[:, m] = np.einsum("kji,kji,ki->j", J[m:], J[: n_samples - m], G) / (n_samples - m)
-        var = _two_sided_sum(r_h, c_x)
+        var = _two_sided_sum(r_h, _operational_autocovariance(theta, J, models, r_h.size - 1))
     var = var + np.var(_mean_signal_operational(J, models, H, h), axis=0)
     return np.sqrt(np.maximum(var, 0.0))
 
@@ -695,15 +899,15 @@ def exact_std_joint_architecture(theta, J, H, phi, models, h) -> np.ndarray:
     J : array_like, shape (N, m, n)
     H : array_like, shape (N, m, n, n)
         Hessians of the forward kinematics at ``theta``.
-    phi : array_like, shape (N, n)
+    phi : array_like, shape (N, n), or (F, N, n) with a bank of F filters
         True joint derivative estimate, i.e. the joint filter applied to the truth.
     models : QuantizerErrorModel or sequence of n
-    h : array_like, shape (L,)
+    h : array_like, shape (L,), or a sequence of F such responses (a bank)
         Impulse response of the joint filter ``G`` (the same for every joint).
 
     Returns
     -------
-    ndarray, shape (m,)
+    ndarray, shape (m,), or (F, m) for a bank (one pass over the lags serves every filter)
 
     Notes
     -----
@@ -717,25 +921,49 @@ def exact_std_joint_architecture(theta, J, H, phi, models, h) -> np.ndarray:
     would cost ``O(N L^2)``. The tie-rule mean adds ``var_k`` of the deterministic signal
     ``sum_i (J_ji sum(h) + c_ji) mean_i``.
     """
-    theta, J, models, c = _check_joint_architecture(theta, J, H, phi, models)
+    bank = not (isinstance(h, np.ndarray) and h.ndim == 1) and isinstance(h, (Sequence, np.ndarray)) \
+        and len(h) > 0 and np.ndim(h[0]) == 1
+    hs = [_impulse(x) for x in h] if bank else [_impulse(h)]
+    phis = np.asarray(phi, dtype=np.float64)
+    if bank:
+        if phis.ndim != 3 or phis.shape[0] != len(hs):
+            raise ValueError(f"phi must have shape ({len(hs)}, N, n) for a bank of {len(hs)} filters, "
+                             f"got {phis.shape}")
+    else:
+        phis = phis[None]
+    checked = [_check_joint_architecture(theta, J, H, p, models) for p in phis]
+    theta, J, models = checked[0][:3]
+    cs = [chk[3] for chk in checked]
     n_samples = theta.shape[0]
-    h = _impulse(h)
-    r_h = impulse_autocorrelation(h)
+    r_hs = [impulse_autocorrelation(x) for x in hs]
+    max_lag = max(r.size for r in r_hs) - 1
     m_out = J.shape[1]
-    filtered = np.empty((m_out, r_h.size))
-    cross = np.zeros(m_out)
+    filtered = np.empty((m_out, max_lag + 1))
+    cross = np.zeros((len(hs), m_out))
+    # h_f(m), zero beyond each response's length, and J_ji c_ji for every filter.
+    weights = np.zeros((len(hs), max_lag + 1))
+    for f, x in enumerate(hs):
+        weights[f, : x.size] = x
+    # J_ji c_ji laid out (F * m, N * n) so that the samples k >= m of every row are one
+    # strided block: the cross term of every filter at lag m is one matrix-vector product.
+    n = theta.shape[1]
+    jc = np.ascontiguousarray(np.moveaxis(J[None] * np.array(cs), 1, 2)).reshape(
+        len(hs) * m_out, n_samples * n)
     c0 = None
-    for m, G in _lagged_autocovariances(theta, models, r_h.size - 1):
-        filtered[:, m] = np.einsum("kji,kji,ki->j", J[m:], J[: n_samples - m], G) / (n_samples - m)
+    for m, G in _lagged_autocovariances(theta, models, max_lag):
+        filtered[:, m] = np.einsum("kji,ki->j", J[m:] * J[: n_samples - m], G) / (n_samples - m)
         # Pair (k-m, k): E[e(k-m) e(k)] enters phi~(k) with weight h_m, e(k) multiplies c(k).
-        cross += h[m] * np.einsum("kji,kji,ki->j", J[m:], c[m:], G) / (n_samples - m)
+        pairs = (jc[:, m * n:] @ G.ravel()).reshape(len(hs), m_out)
+        cross += weights[:, m : m + 1] * pairs / (n_samples - m)
         if m == 0:
-            c0 = np.einsum("kji,ki->j", c**2, G) / n_samples
-    var = _two_sided_sum(r_h, filtered) + 2.0 * cross + c0
+            c0 = np.einsum("fkji,ki->fj", np.array(cs) ** 2, G) / n_samples
     mu = np.array([mdl.mean for mdl in models])
-    mean_signal = J @ (mu * float(np.sum(h))) + np.einsum("kji,i->kj", c, mu)
-    var = var + np.var(mean_signal, axis=0)
-    return np.sqrt(np.maximum(var, 0.0))
+    out = np.empty((len(hs), m_out))
+    for f, (x, r_h, c) in enumerate(zip(hs, r_hs, cs)):
+        var = _two_sided_sum(r_h, filtered[:, : r_h.size]) + 2.0 * cross[f] + c0[f]
+        mean_signal = J @ (mu * float(np.sum(x))) + np.einsum("kji,i->kj", c, mu)
+        out[f] = np.sqrt(np.maximum(var + np.var(mean_signal, axis=0), 0.0))
+    return out if bank else out[0]
 
 
 def exact_mean_joint_architecture(J, H, phi, models, h) -> np.ndarray:

@@ -179,6 +179,12 @@ def paper_figures_apply():
     return any(ENTRIES[i].get("group") == group for i in QUANT_IDS)
 
 
+def design_inputs(wildcards):
+    """Rule design: a logged workspace needs the log's canonical table, a box nothing."""
+    log_id = ((config.get("design") or {}).get("workspace") or {}).get("log")
+    return {"canonical": f"results/{log_id}/canonical.parquet"} if log_id else {}
+
+
 def all_targets():
     targets = expand("results/{log_id}/summary.json", log_id=LOG_IDS)
     targets += expand("results/{log_id}/figures/errors.png", log_id=FIGURE_IDS)
@@ -195,6 +201,9 @@ def all_targets():
                     for p in pairs for name in ("diagnostics.png", "before_after.png")]
     if RESIDUAL_IDS:
         targets += ["results/batch/residuals.csv"]
+    if config.get("design"):
+        targets += ["results/design/design.json", "results/design/designs.csv",
+                    "results/design/pareto.png"]
     # batch.smk: the run summary and the report's thumbnails
     targets += ["results/summary.json"]
     targets += [f"results/report/thumbs/{kind}" for kind in report_figures()]
@@ -220,6 +229,7 @@ REPORT_FIGURES = {
     "ratio_figure": ("results/figures/ratios.png", "ratio_figure.rst", "Paper 000", None),
     "fig6": ("results/figures/fig6_position.png", "fig6.rst", "Paper 000", None),
     "fig7": ("results/figures/fig7_derivatives.png", "fig7.rst", "Paper 000", None),
+    "design_pareto": ("results/design/pareto.png", "design_pareto.rst", "Design", None),
 }
 THUMBNAIL_WIDTH = 480
 
@@ -233,6 +243,7 @@ def report_figures():
                                  for i, pairs in RESIDUAL_PAIRS.items() for p in pairs],
         "ratio_figure": [{}] if QUANT_IDS else [],
         "fig6": [{}] if paper_figures_apply() else [],
+        "design_pareto": [{}] if config.get("design") else [],
     }
     for kind, same in (("log_comparison", "log_errors"), ("lrde_dwell", "lrde_corner"),
                        ("lrde_bias_cycles", "lrde_corner"),
@@ -279,4 +290,6 @@ def run_summary_inputs(wildcards):
     tables += ["results/batch/lrde.csv"] if LRDE_IDS else []
     tables += ["results/batch/residuals.csv"] if RESIDUAL_IDS else []
     inputs["tables"] = tables
+    if config.get("design"):
+        inputs["design"] = "results/design/design.json"
     return inputs
