@@ -1,4 +1,4 @@
-"""Per-log overhead of the Snakemake jobs on a batch of many small logs (issue 6, part 3).
+"""Per-log overhead of the Snakemake jobs on a batch of many small logs.
 
 Generates N simulated Phantom runs (Colonnese & Okamura protocol: 3 joints, 1 kHz, 15 s by
 default, ``enclab.simulate.phantom_protocol_run``), a manifest and a configuration in a

@@ -3,7 +3,7 @@
 Clones the repository (``--repo``, default this one) at ``--commit`` (default HEAD) into a
 temporary folder and times ``make run`` there, as a new user runs it: the virtual environment
 and the pinned install included. The phases come from the files the run writes (the install
-stamp, Snakemake's log, the report). Run it through ``/work/bin/heavy``: the full run is ~5-15
+stamp, Snakemake's log, the report). Run it on an otherwise quiet machine: the full run is ~5-15
 CPU-minutes.
 
 Rows appended to ``results/benchmarks/first_run.csv`` (times in s): ``date``, ``machine``,
@@ -14,8 +14,8 @@ Rows appended to ``results/benchmarks/first_run.csv`` (times in s): ``date``, ``
 
 Usage::
 
-    /work/bin/heavy .venv/bin/python workflow/benchmarks/bench_first_run.py
-    /work/bin/heavy .venv/bin/python workflow/benchmarks/bench_first_run.py --commit 40d78c3 --test
+    .venv/bin/python workflow/benchmarks/bench_first_run.py
+    .venv/bin/python workflow/benchmarks/bench_first_run.py --commit 40d78c3 --test
     .venv/bin/python workflow/benchmarks/bench_first_run.py --quick   # 4 logs, ~1 CPU-minute
 """
 from __future__ import annotations

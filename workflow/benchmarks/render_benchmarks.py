@@ -25,7 +25,7 @@ from provenance import PROVENANCE, ROOT  # noqa: E402
 
 # (file name, title, caption): the order of docs/benchmarks.md.
 TABLES = [
-    ("make_run.csv", "First run",
+    ("first_run.csv", "First run",
      "`make run` and `make test` on a fresh clone, install included."),
     ("performance.csv", "Throughput of the paper-000 stages",
      "Per-stage throughput, time as a ratio to `pyarrow` reading the same file (same run), peak "

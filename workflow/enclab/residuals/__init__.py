@@ -1,4 +1,4 @@
-"""Residual stage of issue 4: what the exact quantizer model misses, and which effect explains it.
+"""Residual stage: what the exact quantizer model misses, and which effect explains it.
 
 :mod:`enclab.residuals.effects` holds the effect library (composable terms of the measured
 channel's model), :mod:`enclab.residuals.select` the forward selection with held-out
