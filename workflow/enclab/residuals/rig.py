@@ -96,6 +96,11 @@ class RigSpec:
         ``{torque channel: [term, ...]}`` (terms ``linear``, ``signed_square``); empty = none.
     max_play : float
         Upper bound of the play width (rad).
+    transient : float or None
+        Knot spacing (rad of truth travel) of a shared reversal transient: a spline in the
+        truth's travel since the last reversal, odd in the direction of motion, vanishing from
+        ``travel`` on (the mean motion of the measured side inside the play that a play
+        operator cannot follow); ``None`` = none.
     travel, t_skip : float
         Steady strokes: more than ``travel`` rad since the last reversal; every score leaves
         out the first ``t_skip`` s (and the fit does too).
@@ -110,6 +115,7 @@ class RigSpec:
     spacing: float | None = 0.05
     compliance: Mapping = field(default_factory=dict)
     max_play: float = 0.08
+    transient: float | None = None
     travel: float = 0.06
     t_skip: float = 1.5
     n_iter: int = 20
@@ -185,6 +191,49 @@ def steady_mask(t, truth, travel: float = 0.06, t_skip: float = 1.5) -> np.ndarr
 # ----------------------------------------------------------------------------- model pieces
 
 
+def reversal_travel(truth, hysteresis: float = 2e-4) -> tuple[np.ndarray, np.ndarray]:
+    """Truth travel since the last reversal (rad, >= 0) and the direction of motion (+1/-1).
+
+    A reversal is a change of direction of a play operator of width ``hysteresis`` (so that
+    the dithering of a truth reading at rest is not a reversal); the travel is measured from
+    the extreme of the truth before it.
+    """
+    x = np.asarray(truth, dtype=np.float64)
+    p = play_operator(x, hysteresis)
+    d = motion_sign(np.diff(p, prepend=p[0]))
+    d[d == 0] = 1.0
+    change = np.flatnonzero(np.diff(d) != 0) + 1
+    starts = np.concatenate(([0], change))
+    ends = np.concatenate((change, [x.size]))
+    travel = np.zeros_like(x)
+    prev = None
+    for s0, e0 in zip(starts, ends):
+        seg = x[s0:e0]
+        if prev is None:
+            turn = seg[0]
+        else:
+            turn = np.max(x[prev[0]:prev[1]]) if d[s0] < 0 else np.min(x[prev[0]:prev[1]])
+        travel[s0:e0] = np.maximum(d[s0] * (seg - turn), 0.0)
+        prev = (s0, e0)
+    return travel, d
+
+
+def transient_columns(truth, spacing: float, travel: float) -> np.ndarray:
+    """Columns of the reversal transient: cubic B-splines in the travel since the last
+    reversal on ``[0, travel]`` (knots every ``spacing``), times the direction; the two that do
+    not vanish with their slope at ``travel`` are dropped, so the transient ends smoothly."""
+    from scipy.interpolate import BSpline
+
+    dist, direction = reversal_travel(truth)
+    n_int = max(int(np.ceil(travel / spacing - 1e-9)), 1)
+    knots = np.concatenate(([0.0] * 3, np.linspace(0.0, travel, n_int + 1), [travel] * 3))
+    inside = dist < travel
+    B = np.zeros((dist.size, len(knots) - 4))
+    if inside.any():
+        B[inside] = BSpline.design_matrix(dist[inside], knots, 3).toarray()
+    return B[:, :-2] * direction[:, None]
+
+
 def _shared_columns(run: Run, spec: RigSpec, basis: MapBasis | None, a_mid: float):
     names, cols = [], []
     a = run.measured
@@ -198,6 +247,10 @@ def _shared_columns(run: Run, spec: RigSpec, basis: MapBasis | None, a_mid: floa
     if spec.compliance:
         names += compliance_names(spec.compliance)
         cols.append(compliance_columns(spec.compliance, run.torques))
+    if spec.transient:
+        T = transient_columns(run.truth, spec.transient, spec.travel)
+        names += [f"transient{j}" for j in range(T.shape[1])]
+        cols.append(T)
     X = np.hstack(cols) if cols else np.zeros((a.size, 0))
     return names, X
 
