@@ -61,6 +61,12 @@ def test_map_basis_has_no_constant_or_linear_part_and_reproduces_splines():
     assert np.max(np.abs(basis.curve(coef, grid) - target)) < 1e-10
     # clamped outside the range
     assert np.allclose(basis.design([-1.0, 2.0]), basis.design([0.0, 1.0]))
+    # a reference range: no linear part there, and no shape lost at the ends
+    inner = cal.MapBasis(0.0, 1.0, 0.1, ref=(0.2, 0.8))
+    ref = np.linspace(0.2, 0.8, 501)
+    Dr = inner.design(ref)
+    assert inner.n_columns == D.shape[1]
+    assert np.max(np.abs(np.column_stack([np.ones_like(ref), ref]).T @ Dr)) < 1e-8 * ref.size
 
 
 def test_map_basis_rejects_bad_ranges():
@@ -68,6 +74,8 @@ def test_map_basis_rejects_bad_ranges():
         cal.MapBasis(1.0, 1.0, 0.1)
     with pytest.raises(ValueError, match="spacing"):
         cal.MapBasis(0.0, 1.0, 0.0)
+    with pytest.raises(ValueError, match="reference range"):
+        cal.MapBasis(0.0, 1.0, 0.1, ref=(-0.1, 0.5))
 
 
 def test_compliance_columns_and_curve():
@@ -143,10 +151,10 @@ def test_calibration_map_recovered_within_its_band(sim_fit):
     a = np.linspace(lo + 0.02, hi - 0.02, 400)
     curve, band_lo, band_hi = sim_fit.map_curve(a)
     # The fitted map is a function of the reading a = g(y) = y + s (y - A) + m(y): the truth is
-    # r(a) = a - g^-1(a), with its constant and linear part (over the basis range) removed.
+    # r(a) = a - g^-1(a), with its constant and linear part (over the reference range) removed.
     y = np.linspace(-0.2, 1.2, 20001)
     g = y + 0.02 * (y - 0.5) + true_map(y)
-    grid = np.linspace(lo, hi, 2001)
+    grid = np.linspace(*sim_fit.basis.ref, 2001)
     r_grid = np.interp(grid, g, g - y)
     lin = np.column_stack([np.ones_like(grid), grid])
     c, *_ = np.linalg.lstsq(lin, r_grid, rcond=None)

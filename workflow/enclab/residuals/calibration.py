@@ -6,7 +6,7 @@ their columns over many runs and solves one least-squares problem.
 **Calibration map** (:class:`MapBasis`). A repeatable error of the measured side that depends on
 its own angle ``a``: ``reading = a + s (a - a_mid) + m(a)``. ``m`` is a cubic spline with knots
 every ``spacing`` rad over ``[lo, hi]``, with its constant and linear parts removed (on a uniform
-grid over ``[lo, hi]``): the constant is a counter's zero (fitted per run), the linear part is
+grid over ``[lo, hi]`` or a reference range inside it): the constant is a counter's zero (fitted per run), the linear part is
 the scale ``s`` (a counts-per-rev or gear-ratio mismatch), reported on its own. What is left,
 ``m``, is the shape no scale or offset can make: the curve a lab applies as a calibration.
 *Signature* when present and not modelled: a residual that is the same function of the angle in
@@ -56,16 +56,23 @@ class MapBasis:
         ``ceil((hi - lo) / spacing)`` equal intervals.
     n_grid : int
         Points of the uniform grid on which the constant and linear parts are removed.
+    ref : tuple of float or None
+        ``(lo, hi)`` of that grid (default the whole range). The ends of a stroke are where a
+        motion reverses and where the data say least about the map; the scale is better
+        defined as the slope over the well-covered middle.
     """
 
     lo: float
     hi: float
     spacing: float
     n_grid: int = 2001
+    ref: tuple | None = None
 
     def __post_init__(self):
         if not (np.isfinite(self.lo) and np.isfinite(self.hi) and self.hi > self.lo):
             raise ValueError(f"map range must satisfy lo < hi, got lo={self.lo!r}, hi={self.hi!r}")
+        if self.ref is not None and not (self.lo <= self.ref[0] < self.ref[1] <= self.hi):
+            raise ValueError(f"map reference range {self.ref!r} must lie inside [{self.lo!r}, {self.hi!r}]")
         if not (np.isfinite(self.spacing) and self.spacing > 0):
             raise ValueError(f"knot spacing must be positive, got spacing={self.spacing!r}")
 
@@ -81,11 +88,11 @@ class MapBasis:
 
     @cached_property
     def _projection(self):
+        ref = np.linspace(*(self.ref or (self.lo, self.hi)), self.n_grid)
+        coef, *_ = np.linalg.lstsq(np.column_stack([np.ones_like(ref), ref]), self._raw(ref), rcond=None)
+        # Directions on the whole range: a B-spline outside the reference range is still a shape.
         grid = np.linspace(self.lo, self.hi, self.n_grid)
-        lin = np.column_stack([np.ones_like(grid), grid])
-        raw = self._raw(grid)
-        coef, *_ = np.linalg.lstsq(lin, raw, rcond=None)
-        resid = raw - lin @ coef
+        resid = self._raw(grid) - np.column_stack([np.ones_like(grid), grid]) @ coef
         _, sv, vt = np.linalg.svd(resid, full_matrices=False)
         keep = sv > sv[0] * 1e-9
         # Columns scaled to unit rms on the grid: coefficients are then in rad.

@@ -357,6 +357,13 @@ def map_range(runs: Sequence[Run]) -> tuple[float, float]:
     return (float(min(np.min(r.measured) for r in runs)), float(max(np.max(r.measured) for r in runs)))
 
 
+def make_basis(runs: Sequence[Run], spacing: float) -> MapBasis:
+    """The map's basis over the runs' range; its scale is the slope over the middle 90 % of
+    the range (the ends are where the motion reverses)."""
+    lo, hi = map_range(runs)
+    return MapBasis(lo, hi, float(spacing), ref=(lo + 0.05 * (hi - lo), hi - 0.05 * (hi - lo)))
+
+
 def fit_rig(runs: Sequence[Run], spec: RigSpec, widths: Mapping | None = None) -> RigFit:
     """Fit the rig model on ``runs`` (the training runs).
 
@@ -374,7 +381,7 @@ def fit_rig(runs: Sequence[Run], spec: RigSpec, widths: Mapping | None = None) -
     if not runs:
         raise ValueError("a rig fit needs at least one run")
     lo, hi = map_range(runs)
-    basis = MapBasis(lo, hi, spec.spacing) if spec.spacing else None
+    basis = make_basis(runs, spec.spacing) if spec.spacing else None
     a_mid = 0.5 * (lo + hi)
     zero = {r.run_id: np.zeros_like(r.t) for r in runs}
     per = {r.run_id: _per_run(r, spec, zero[r.run_id]) for r in runs} if widths is None else \
@@ -444,7 +451,7 @@ def choose_spacing(runs: Sequence[Run], spec: RigSpec, candidates: Sequence[floa
     lo, hi = map_range(runs)
     scores = {}
     for s in candidates:
-        basis = MapBasis(lo, hi, float(s))
+        basis = make_basis(runs, s)
         _, eqs = _normal_equations(runs, spec, basis, 0.5 * (lo + hi), widths)
         G = sum(e[0] for e in eqs)
         h = sum(e[1] for e in eqs)
