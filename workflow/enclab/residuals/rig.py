@@ -517,7 +517,8 @@ def make_folds(runs: Sequence[Run], splits: Sequence[Mapping]) -> list[dict]:
 
 
 def evaluate(runs: Sequence[Run], spec: RigSpec, folds: Sequence[Mapping],
-             spacings: Sequence[float] | None = None) -> tuple[list[dict], list[dict]]:
+             spacings: Sequence[float] | None = None,
+             keep_residuals: bool = False) -> tuple[list[dict], list[dict]]:
     """Fit on each fold's training runs, score every run of the fold.
 
     ``spacings``: candidate knot spacings chosen per fold on the training runs alone
@@ -529,7 +530,8 @@ def evaluate(runs: Sequence[Run], spec: RigSpec, folds: Sequence[Mapping],
         One per fold and run: ``split``, ``fold``, ``run_id``, ``role`` (train/test), the
         conditions, the before (offset only) and after std (steady, all), the per-run effects.
     folds_out : list of dict
-        One per fold: the spacing, the shared coefficients and their intervals, the fit.
+        One per fold: the spacing, the shared coefficients and their intervals, the fit, and
+        (``keep_residuals``) ``residuals``: ``{run id: reading - prediction}`` of its test runs.
     """
     by_id = {r.run_id: r for r in runs}
     rows, out = [], []
@@ -546,10 +548,13 @@ def evaluate(runs: Sequence[Run], spec: RigSpec, folds: Sequence[Mapping],
             best, scores = choose_spacing(train, spec, spacings)
             fspec = spec.with_(spacing=best)
         fit = fit_rig(train, fspec)
+        kept = {}
         for role, ids in (("train", fold["train"]), ("test", fold["test"])):
             for i in ids:
                 run = by_id[i]
                 pred, per = predict_run(fit, run)
+                if keep_residuals and role == "test":
+                    kept[i] = run.measured - pred
                 sc = score_run(run, pred, fspec)
                 rows.append({"split": fold["split"], "fold": fold["fold"], "run_id": i, "role": role,
                              **run.conditions,
@@ -559,7 +564,8 @@ def evaluate(runs: Sequence[Run], spec: RigSpec, folds: Sequence[Mapping],
                              "n_steady": sc["n_steady"], "n_all": sc["n_all"],
                              "steady_ss": sc["steady_ss"], "all_ss": sc["all_ss"],
                              "floor_std": floor_std(run.step, run.truth_step), **per})
-        out.append({**fold, "spacing": fspec.spacing, "spacing_scores": scores, "fit": fit})
+        out.append({**fold, "spacing": fspec.spacing, "spacing_scores": scores, "fit": fit,
+                    **({"residuals": kept} if keep_residuals else {})})
     return rows, out
 
 
