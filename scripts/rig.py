@@ -15,7 +15,8 @@ def main(smk):
                                            list(p.compliance), member["conditions"], member["log_id"]))
     s = dict(p.settings)
     spec = rig.RigSpec(spacing=max(s["spacings"]), compliance=dict(p.compliance), max_play=s["max_play"],
-                       travel=s["travel"], t_skip=s["t_skip"], transient=s.get("transient"))
+                       travel=s["travel"], t_skip=s["t_skip"], transient=s.get("transient"),
+                       latency=True if s.get("latency") == "run" else "shared")
     out = report_rig(smk.wildcards.rig, p.pair["measured"], runs, spec, list(p.splits), s["spacings"],
                      p.truth_counts_per_rev)
     io.write_json(out["block"], smk.output.block)

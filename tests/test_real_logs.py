@@ -43,6 +43,10 @@ def angle(df, meta, name):
 
 def test_every_entry_ingests_with_the_expected_size(logs):
     sizes = {log_id: (len(df), meta["n_samples"]) for log_id, (_, df, meta) in logs.items()}
+    # the other 19 runs of the MRDLab rig: 19 994-19 998 samples per file (PROVENANCE.md)
+    rig_runs = {k: sizes.pop(k) for k in [k for k in sizes if k.startswith("mrdlab_") and k != "mrdlab_0p5hz"]}
+    assert len(rig_runs) == 19
+    assert all(19994 <= n == m <= 19998 for n, m in rig_runs.values())
     assert sizes == {
         "mrdlab_0p5hz": (19996, 19996),  # 19 994-19 998 per MRDLab file
         "encos_5hz": (6700, 6700),  # samples 600..7299 kept by the crop

@@ -250,3 +250,53 @@ def test_reversal_transient_recovered(sim_rig):
     floor = rig.floor_std(STEP, TRUTH_STEP)
     # 2 x 2000 samples: the std of a uniform error is known to a few per cent
     assert max(s1) < 1.05 * floor and min(s0) > 1.3 * floor
+
+
+def test_shared_latency_recovered(sim_rig):
+    spec = rig.RigSpec(spacing=0.05, compliance=SPEC_COMP, latency="shared")
+    fit = rig.fit_rig(sim_rig[:7], spec)
+    # every run has 1 ms; the reading's slope (1.02 and the map's) scales it by a few per cent
+    assert fit.shared()["latency"] == pytest.approx(1e-3, rel=0.1)
+    assert all(v["latency"] == 0.0 for v in fit.per_run.values())
+    lo, hi = fit.ci()["latency"]
+    assert lo < fit.shared()["latency"] < hi
+
+
+def test_rig_report_tables_figures_and_words(sim_rig):
+    from enclab.residuals import rig_report
+
+    runs = sim_rig[:6]
+    spec = rig.RigSpec(spacing=0.1, compliance=SPEC_COMP, latency="shared", transient=0.01)
+    out = rig_report.report_rig("sim", "theta_out", runs, spec,
+                                [{"name": "freq", "by": "frequency_hz", "train": [0.5], "test": [0.75]}],
+                                [0.3, 0.05], truth_counts_per_rev=146860)
+    block = out["block"]
+    assert [s["split"] for s in block["splits"]] == ["freq"]
+    split = block["splits"][0]
+    assert split["test_runs"] == 3 and split["after_all"] < split["before_all"]
+    assert block["final"]["spacing"] == 0.05
+    assert len(block["final"]["map"]["curve"]) == 101
+    cond = out["tables"]["conditions"]
+    assert set(cond["condition"]) == {"frequency_hz", "load"}
+    assert set(cond[cond["condition"] == "load"]["value"]) == {0.0, 0.3, 0.6}
+    rem = block["remains"]["freq"]
+    assert 0 < rem["window_share"] < 1 and rem["window_fraction"] < 0.5
+    assert [len(f.axes) for f in out["figures"].values()] == [1, 2, 1, 1]
+    text = out["markdown"]
+    assert "## Held out" in text and "## What remains" in text and "counts per" in text
+
+
+def test_remains_separates_repeatable_from_random_motion_in_the_play(sim_rig):
+    from enclab.residuals.rig_report import remains
+
+    spec = rig.RigSpec()
+    rng = np.random.default_rng(0)
+    same, random = {}, {}
+    for run in sim_rig[:4]:
+        travel, direction = rig.reversal_travel(run.truth)
+        win = travel < spec.travel
+        same[run.run_id] = np.where(win, direction * 1e-3 * np.sin(np.pi * travel / spec.travel), 0.0)
+        random[run.run_id] = np.where(win, 1e-3 * rng.standard_normal(run.t.size), 0.0)
+    assert remains(sim_rig[:4], same, spec)["repeatable_share"] > 0.95
+    assert remains(sim_rig[:4], random, spec)["repeatable_share"] < 0.1
+    assert remains(sim_rig[:4], same, spec)["window_share"] > 0.99

@@ -89,7 +89,8 @@ class RigSpec:
     Parameters
     ----------
     play, latency, scale : bool
-        Per-run play width and latency; the shared scale.
+        Per-run play width and latency (``latency="shared"``: one latency for the rig, a
+        column ``-d theta / dt`` of the truth); the shared scale.
     spacing : float or None
         Knot spacing (rad) of the calibration map; ``None`` = no map.
     compliance : dict
@@ -110,7 +111,7 @@ class RigSpec:
     """
 
     play: bool = True
-    latency: bool = True
+    latency: bool | str = True
     scale: bool = True
     spacing: float | None = 0.05
     compliance: Mapping = field(default_factory=dict)
@@ -240,6 +241,9 @@ def _shared_columns(run: Run, spec: RigSpec, basis: MapBasis | None, a_mid: floa
     if spec.scale:
         names.append("scale")
         cols.append((a - a_mid)[:, None])
+    if spec.latency == "shared":
+        names.append("latency")
+        cols.append(-np.gradient(run.truth, run.t)[:, None])
     if basis is not None:
         D = basis.design(a)
         names += [f"map{j}" for j in range(D.shape[1])]
@@ -263,7 +267,7 @@ def _played(run: Run, width: float) -> tuple[np.ndarray, np.ndarray]:
 
 def _nuisance(spec: RigSpec, dp: np.ndarray) -> np.ndarray:
     cols = [np.ones_like(dp)]
-    if spec.latency:
+    if spec.latency is True:
         cols.append(-dp)
     return np.column_stack(cols)
 
@@ -304,7 +308,7 @@ def _per_run(run: Run, spec: RigSpec, shared_pred: np.ndarray, around: float | N
         width = float(res.x) if res.fun <= rss[i] else float(grid[i])
     _, beta = solve(width)
     return {"offset": float(beta[0]), "play_width": width,
-            "latency": float(beta[1]) if spec.latency else 0.0}
+            "latency": float(beta[1]) if spec.latency is True else 0.0}
 
 
 def _prediction(run: Run, spec: RigSpec, shared_pred: np.ndarray, per: Mapping) -> np.ndarray:

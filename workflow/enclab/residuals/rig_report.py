@@ -247,15 +247,17 @@ def markdown(name: str, channel: str, result: Mapping, conditions: Sequence[str]
     fit = result["final"]
     lines = [f"# Rig {name}: {channel}", ""]
     n = len(fit.train_ids)
-    lines += [f"{n} runs fitted together. Per run: offset, play width, latency. Shared by the rig: "
+    per_run = "offset, play width" + (", latency" if fit.spec.latency is True else "")
+    lines += [f"{n} runs fitted together. Per run: {per_run}. Shared by the rig: "
               + ", ".join(x for x in (["scale"] if fit.spec.scale else [])
+                          + (["latency"] if fit.spec.latency == "shared" else [])
                           + ([f"calibration map (knots every {fit.spec.spacing:g} rad, chosen on "
                               "held-out runs)"] if fit.spec.spacing else [])
                           + ([f"compliance {compliance_names(fit.spec.compliance)}"] if fit.spec.compliance else [])
                           + ([f"reversal transient (knots every {fit.spec.transient:g} rad)"] if fit.spec.transient else []))
               + ".", ""]
     lines += ["## Held out", "", "Residual std (mrad) of reading - prediction on runs the shared terms never "
-              "saw (their own offset, play and latency refitted): *steady* = strokes with more than "
+              f"saw (their own {per_run} refitted): *steady* = strokes with more than "
               f"{fit.spec.travel:g} rad of truth travel since the last reversal, *all* = every sample after "
               f"{fit.spec.t_skip:g} s. *before* = the offset alone.", ""]
     st = split_table(result["rows"])
@@ -288,9 +290,10 @@ def markdown(name: str, channel: str, result: Mapping, conditions: Sequence[str]
                   f"measured-side revolution, not the declared {truth_counts_per_rev:,.0f}."]
     per = pd.DataFrame([{"run": k, **v} for k, v in fit.per_run.items()])
     if len(per):
-        lines += ["", "Per run (fit on all runs): play width (rad), latency (s), offset (rad): "
-                  f"play {per['play_width'].min():.4g}-{per['play_width'].max():.4g} rad, "
-                  f"latency {per['latency'].min() * 1e3:.3g}-{per['latency'].max() * 1e3:.3g} ms."]
+        lines += ["", "Per run (fit on all runs): "
+                  f"play width {per['play_width'].min():.4g}-{per['play_width'].max():.4g} rad"
+                  + (f", latency {per['latency'].min() * 1e3:.3g}-{per['latency'].max() * 1e3:.3g} ms"
+                     if fit.spec.latency is True else "") + "."]
     lines += ["", "## What remains", ""]
     for split, rem in result["remains"].items():
         if not rem:
@@ -338,6 +341,7 @@ def report_rig(name: str, channel: str, runs: Sequence[rg.Run], spec: rg.RigSpec
         "rig": name, "measured": channel, "runs": [r.run_id for r in runs],
         "metric": "std of (reading - prediction) [rad]; steady strokes and all samples after t_skip",
         "settings": {"travel": spec.travel, "t_skip": spec.t_skip, "max_play": spec.max_play,
+                     "latency": "run" if spec.latency is True else spec.latency,
                      "compliance": dict(spec.compliance), "transient": spec.transient,
                      "spacings": list(spacings or [])},
         "splits": split_table(result["rows"]).to_dict("records"),
