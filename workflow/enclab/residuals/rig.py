@@ -11,7 +11,8 @@ channel (e.g. an output encoder). The measured reading of run ``k`` is modelled 
 with **per-run** effects (they may change from run to run and are refitted on every run,
 held-out runs included): the offset ``c_k`` (a counter's zero), the play width ``w_k`` of a
 gear's backlash (:func:`enclab.residuals.effects.play_operator` ``P``) and the latency
-``tau_k`` (a delay of the measured side: ``y(t - tau) ~ y - tau * dy/dt``); and **shared**
+``tau_k`` (a delay of the measured side: ``y(t - tau) ~ y - tau * dy/dt``; or one latency for
+the rig, ``RigSpec(latency="shared")``); and **shared**
 effects (one value for the rig, fitted on training runs only and applied unchanged to held-out
 runs): the scale ``s``, the calibration map ``m`` of the measured-side angle ``a`` (the reading
 itself; :class:`enclab.residuals.calibration.MapBasis`) and the compliance coefficients
@@ -127,6 +128,9 @@ class RigSpec:
         return RigSpec(**d)
 
 
+_CURVES = ("map", "transient")
+
+
 @dataclass
 class RigFit:
     """Shared coefficients and the training runs' per-run effects of a rig fit."""
@@ -142,8 +146,9 @@ class RigFit:
     jack_coef: np.ndarray | None = None  # (n_runs, n_coef) delete-one-run estimates
 
     def shared(self) -> dict:
-        """``{name: value}`` of the scalar shared coefficients (scale, compliance)."""
-        return {n: float(c) for n, c in zip(self.names, self.coef) if not n.startswith("map")}
+        """``{name: value}`` of the scalar shared coefficients (scale, latency, compliance); the
+        map and the reversal transient are curves (:meth:`map_curve`)."""
+        return {n: float(c) for n, c in zip(self.names, self.coef) if not n.startswith(_CURVES)}
 
     def ci(self, z: float = 1.6449) -> dict:
         """``{name: (lo, hi)}`` 90 % intervals (jackknife) of the scalar shared coefficients."""
@@ -151,7 +156,7 @@ class RigFit:
             return {}
         sd = np.sqrt(np.diag(self.cov))
         return {n: (float(c - z * s), float(c + z * s)) for n, c, s in zip(self.names, self.coef, sd)
-                if not n.startswith("map")}
+                if not n.startswith(_CURVES)}
 
     def map_curve(self, a, z: float = 1.6449):
         """The calibration map at ``a``: ``(curve, lo, hi)`` with a 90 % jackknife band (the
