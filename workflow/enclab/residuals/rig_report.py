@@ -305,11 +305,17 @@ def markdown(name: str, channel: str, result: Mapping, conditions: Sequence[str]
             f"{rem['outside_std'] * MRAD:.2f} mrad outside). Of it, {rem['repeatable_share']:.0%} repeats from "
             "reversal to reversal (the mean over all held-out reversals at the same travel and direction); "
             f"the other {1 - rem['repeatable_share']:.0%} does not.")
-    lines += ["", "Inside the play the measured side is not driven by the truth side: it moves when friction "
-              "and the load let it, in steps at times that differ from one reversal to the next "
-              "(stick-slip). A model of the reading as a function of the truth's motion (a play operator, "
-              "a reversal transient) can at best follow the repeatable part; the rest needs a measurement "
-              "of the measured side's own driving torque at the instant it slips, or a stochastic model.", ""]
+    excess = [r for r in result["remains"].values() if r and r["window_std"] > 1.5 * r["outside_std"]]
+    if excess:
+        lines += ["", "The reversal windows hold more than the steady strokes. Inside the play the measured "
+                  "side is not driven by the truth side: it moves when friction and the load let it, in steps "
+                  "at times that differ from one reversal to the next (stick-slip). A model of the reading as a "
+                  "function of the truth's motion (a play operator, a reversal transient) can at best follow "
+                  "the repeatable part; the rest needs a measurement of the measured side's own driving torque "
+                  "at the instant it slips, or a stochastic model.", ""]
+    else:
+        lines += ["", "The reversal windows hold no more than the steady strokes: nothing is left at the "
+                  "reversals.", ""]
     return "\n".join(lines) + "\n"
 
 
