@@ -304,12 +304,16 @@ def markdown(name: str, channel: str, result: Mapping, conditions: Sequence[str]
             f"of the held-out residual's sum of squares (std {rem['window_std'] * MRAD:.2f} mrad inside, "
             f"{rem['outside_std'] * MRAD:.2f} mrad outside). Of it, {rem['repeatable_share']:.0%} repeats from "
             "reversal to reversal (the mean over all held-out reversals at the same travel and direction); "
-            f"the other {1 - rem['repeatable_share']:.0%} does not.")
+            f"the other {1 - rem['repeatable_share']:.0%} does not."
+            + (" The repeatable part is a motion inside the play whose shape changes with the condition "
+               "held out: the training runs' reversal transient does not carry over to it."
+               if rem["repeatable_share"] >= 0.5 and fit.spec.transient else ""))
     excess = [r for r in result["remains"].values() if r and r["window_std"] > 1.5 * r["outside_std"]]
     if excess:
         lines += ["", "The reversal windows hold more than the steady strokes. Inside the play the measured "
                   "side is not driven by the truth side: it moves when friction and the load let it, in steps "
-                  "at times that differ from one reversal to the next (stick-slip). A model of the reading as a "
+                  "at times that differ from one reversal to the next (stick-slip: the part that does not "
+                  "repeat). A model of the reading as a "
                   "function of the truth's motion (a play operator, a reversal transient) can at best follow "
                   "the repeatable part; the rest needs a measurement of the measured side's own driving torque "
                   "at the instant it slips, or a stochastic model.", ""]
