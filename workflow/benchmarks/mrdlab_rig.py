@@ -23,7 +23,7 @@ parameters of each fold and their spread), and copies both to ``--copy-to`` when
 Usage (from the repository root; needs ../shared/data/real)::
 
     .venv/bin/python workflow/benchmarks/mrdlab_rig.py
-    .venv/bin/python workflow/benchmarks/mrdlab_rig.py --models rig --loro
+    .venv/bin/python workflow/benchmarks/mrdlab_rig.py --models rig --loro --suffix _loro
 """
 from __future__ import annotations
 
@@ -82,6 +82,7 @@ def main(argv=None) -> int:
     parser.add_argument("--loro", action="store_true", help="leave-one-run-out folds of the rig model too")
     parser.add_argument("--out", type=Path, default=ROOT / "results" / "benchmarks")
     parser.add_argument("--copy-to", type=Path, default=None)
+    parser.add_argument("--suffix", default="", help="appended to the CSV names (e.g. _loro)")
     args = parser.parse_args(argv)
     if not (ROOT.parent / "shared" / "data" / "real").is_dir():
         print("../shared/data/real is absent: nothing to analyse", file=sys.stderr)
@@ -145,7 +146,8 @@ def main(argv=None) -> int:
         print(table.to_string(), file=sys.stderr)
         print({k: round(v["rel_dev"], 3) for k, v in spread.items() if not k.startswith("transient")}, file=sys.stderr)
     args.out.mkdir(parents=True, exist_ok=True)
-    outputs = {"mrdlab_rig.csv": pd.DataFrame(rows), "mrdlab_rig_params.csv": pd.DataFrame(params)}
+    outputs = {f"mrdlab_rig{args.suffix}.csv": pd.DataFrame(rows),
+               f"mrdlab_rig_params{args.suffix}.csv": pd.DataFrame(params)}
     for name, frame in outputs.items():
         io.write_table(stamp(frame), args.out / name)
         if args.copy_to:
