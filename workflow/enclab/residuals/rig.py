@@ -361,15 +361,17 @@ def _jackknife(eqs):
     return (n - 1) / n * d.T @ d, jack
 
 
-def map_range(runs: Sequence[Run]) -> tuple[float, float]:
-    """Range of the measured-side angle over ``runs`` (rad)."""
-    return (float(min(np.min(r.measured) for r in runs)), float(max(np.max(r.measured) for r in runs)))
+def map_range(runs: Sequence[Run], t_skip: float = 0.0) -> tuple[float, float]:
+    """Range of the measured-side angle over ``runs`` (rad), samples after ``t_skip`` only
+    (those the fit sees: a map beyond them would be unconstrained)."""
+    keep = [r.measured[r.t >= r.t[0] + t_skip] for r in runs]
+    return (float(min(np.min(k) for k in keep)), float(max(np.max(k) for k in keep)))
 
 
-def make_basis(runs: Sequence[Run], spacing: float) -> MapBasis:
+def make_basis(runs: Sequence[Run], spacing: float, t_skip: float = 0.0) -> MapBasis:
     """The map's basis over the runs' range; its scale is the slope over the middle 90 % of
     the range (the ends are where the motion reverses)."""
-    lo, hi = map_range(runs)
+    lo, hi = map_range(runs, t_skip)
     return MapBasis(lo, hi, float(spacing), ref=(lo + 0.05 * (hi - lo), hi - 0.05 * (hi - lo)))
 
 
@@ -389,8 +391,8 @@ def fit_rig(runs: Sequence[Run], spec: RigSpec, widths: Mapping | None = None) -
     """
     if not runs:
         raise ValueError("a rig fit needs at least one run")
-    lo, hi = map_range(runs)
-    basis = make_basis(runs, spec.spacing) if spec.spacing else None
+    lo, hi = map_range(runs, spec.t_skip)
+    basis = make_basis(runs, spec.spacing, spec.t_skip) if spec.spacing else None
     a_mid = 0.5 * (lo + hi)
     zero = {r.run_id: np.zeros_like(r.t) for r in runs}
     per = {r.run_id: _per_run(r, spec, zero[r.run_id]) for r in runs} if widths is None else \
@@ -457,10 +459,10 @@ def choose_spacing(runs: Sequence[Run], spec: RigSpec, candidates: Sequence[floa
     if widths is None:
         base = fit_rig(runs, spec)
         widths = {k: v["play_width"] for k, v in base.per_run.items()}
-    lo, hi = map_range(runs)
+    lo, hi = map_range(runs, spec.t_skip)
     scores = {}
     for s in candidates:
-        basis = make_basis(runs, s)
+        basis = make_basis(runs, s, spec.t_skip)
         _, eqs = _normal_equations(runs, spec, basis, 0.5 * (lo + hi), widths)
         G = sum(e[0] for e in eqs)
         h = sum(e[1] for e in eqs)
