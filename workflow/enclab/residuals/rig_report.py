@@ -20,6 +20,8 @@ __all__ = ["analyse_rig", "remains", "map_figure", "compliance_figure", "heldout
            "remains_figure", "markdown", "condition_table", "split_table"]
 
 MRAD = 1e3
+#: Largest relative change of a shared parameter between folds for it to count as pinned down.
+SPREAD = 0.15
 
 
 def remains(runs: Sequence[rg.Run], residuals: Mapping, spec: rg.RigSpec, bin_width: float = 0.002) -> dict:
@@ -284,6 +286,12 @@ def markdown(name: str, channel: str, result: Mapping, conditions: Sequence[str]
                     "fold_spread": spread.get(k, {}).get("rel_dev")})
     if prm:
         lines.append(pd.DataFrame(prm).to_markdown(index=False, floatfmt=".4g"))
+        loose = [p["parameter"] for p in prm if p["fold_spread"] is not None and p["fold_spread"] > SPREAD]
+        if loose:
+            lines += ["", f"Not pinned down: {', '.join(loose)} move by more than {SPREAD:.0%} between folds; "
+                      "read them as a fit of these runs, not as physical values (the folds' training runs do "
+                      "not cover the same range of the covariate, and the terms trade off against each other "
+                      "and the per-run play there)."]
     if truth_counts_per_rev and "scale" in fit.shared():
         s = fit.shared()["scale"]
         lines += ["", f"Scale {s:+.4g}: the truth channel reads {truth_counts_per_rev * (1 - s):,.0f} counts per "
