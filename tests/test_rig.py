@@ -265,7 +265,7 @@ def test_shared_latency_recovered(sim_rig):
 def test_rig_report_tables_figures_and_words(sim_rig):
     from enclab.residuals import rig_report
 
-    runs = sim_rig[:6]
+    runs = [sim_rig[i] for i in (0, 1, 3, 4)]
     spec = rig.RigSpec(spacing=0.1, compliance=SPEC_COMP, latency="shared", transient=0.01)
     out = rig_report.report_rig("sim", "theta_out", runs, spec,
                                 [{"name": "freq", "by": "frequency_hz", "train": [0.5], "test": [0.75]}],
@@ -273,12 +273,12 @@ def test_rig_report_tables_figures_and_words(sim_rig):
     block = out["block"]
     assert [s["split"] for s in block["splits"]] == ["freq"]
     split = block["splits"][0]
-    assert split["test_runs"] == 3 and split["after_all"] < split["before_all"]
+    assert split["test_runs"] == 2 and split["after_all"] < split["before_all"]
     assert block["final"]["spacing"] == 0.05
     assert len(block["final"]["map"]["curve"]) == 101
     cond = out["tables"]["conditions"]
     assert set(cond["condition"]) == {"frequency_hz", "load"}
-    assert set(cond[cond["condition"] == "load"]["value"]) == {0.0, 0.3, 0.6}
+    assert set(cond[cond["condition"] == "load"]["value"]) == {0.0, 0.3}
     rem = block["remains"]["freq"]
     assert 0 < rem["window_share"] < 1 and rem["window_fraction"] < 0.5
     assert [len(f.axes) for f in out["figures"].values()] == [1, 2, 1, 1]
