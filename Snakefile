@@ -13,6 +13,7 @@ include: "workflow/rules/lrde.smk"
 include: "workflow/rules/residuals.smk"
 include: "workflow/rules/chunks.smk"
 include: "workflow/rules/design.smk"
+include: "workflow/rules/rig.smk"
 
 
 rule all:

@@ -43,6 +43,14 @@ def angle(df, meta, name):
 
 def test_every_entry_ingests_with_the_expected_size(logs):
     sizes = {log_id: (len(df), meta["n_samples"]) for log_id, (_, df, meta) in logs.items()}
+    # the other 19 runs of the MRDLab rig (measured with enclab: 19 982-20 000 samples per file)
+    rig_runs = {k: sizes.pop(k)[0] for k in [k for k in sizes if k.startswith("mrdlab_") and k != "mrdlab_0p5hz"]}
+    assert rig_runs == {
+        "mrdlab_00": 19994, "mrdlab_01": 19996, "mrdlab_02": 20000, "mrdlab_03": 20000,
+        "mrdlab_10": 19997, "mrdlab_11": 20000, "mrdlab_12": 20000, "mrdlab_13": 20000,
+        "mrdlab_20": 19998, "mrdlab_21": 20000, "mrdlab_22": 19982, "mrdlab_23": 20000,
+        "mrdlab_30": 19995, "mrdlab_31": 20000, "mrdlab_32": 20000, "mrdlab_33": 20000,
+        "mrdlab_41": 20000, "mrdlab_42": 20000, "mrdlab_43": 19991}
     assert sizes == {
         "mrdlab_0p5hz": (19996, 19996),  # 19 994-19 998 per MRDLab file
         "encos_5hz": (6700, 6700),  # samples 600..7299 kept by the crop

@@ -13,6 +13,7 @@ from enclab import io as enclab_io
 from enclab import manifest as enclab_manifest
 from enclab.errors import EnclabInputError
 from enclab.residuals.pipeline import residual_pairs as enclab_residual_pairs
+from enclab.residuals.rig_manifest import rig_groups as enclab_rig_groups
 
 
 with open(os.path.join(workflow.basedir, "workflow/schemas/config.schema.yaml")) as handle:
@@ -77,6 +78,12 @@ LRDE_IDS = [i for i in LOG_IDS if "lrde" in _stages(ENTRIES[i])]
 RESIDUAL_PAIRS = {i: enclab_residual_pairs(ENTRIES[i]) for i in LOG_IDS}
 RESIDUAL_PAIRS = {i: p for i, p in RESIDUAL_PAIRS.items() if p}
 RESIDUAL_IDS = sorted(RESIDUAL_PAIRS)
+# Rigs (rig.smk): runs a manifest groups with a `rig` key; a rig with a failed run is left out.
+try:
+    RIGS = {name: rig for name, rig in enclab_rig_groups(list(ENTRIES.values())).items()
+            if all(r["log_id"] in LOG_IDS for r in rig["runs"])}
+except ValueError as err:
+    raise WorkflowError(f"{config['manifest']}: {err}") from None
 
 
 def _first_of_groups(ids):
@@ -166,6 +173,22 @@ def residual_pair(wildcards):
                         "with a truth channel on the same joint")
 
 
+def rig_pair(wildcards):
+    for pair in RIGS[wildcards.rig]["pairs"]:
+        if pair["measured"] == wildcards.channel:
+            return pair
+    raise WorkflowError(f"rig {wildcards.rig!r} has no measured channel {wildcards.channel!r}")
+
+
+def rig_truth_cpr(wildcards):
+    """Counts per measured-side revolution the truth channel declares (counts_per_rev x
+    gear_ratio), for the rig report's scale; None for a channel in rad."""
+    first = ENTRIES[RIGS[wildcards.rig]["runs"][0]["log_id"]]
+    chan = next(c for c in first["channels"] if c["name"] == rig_pair(wildcards)["truth"])
+    cpr = chan.get("counts_per_rev")
+    return float(cpr) * float(chan.get("gear_ratio") or 1) if cpr else None
+
+
 def lrde_settings(wildcards):
     """config["lrde"] updated with the log's own analysis.lrde block."""
     settings = dict(config.get("lrde") or {})
@@ -201,6 +224,7 @@ def all_targets():
                     for p in pairs for name in ("diagnostics.png", "before_after.png")]
     if RESIDUAL_IDS:
         targets += ["results/batch/residuals.csv"]
+    targets += [f"results/rigs/{name}/{p['measured']}/report.md" for name, rig in RIGS.items() for p in rig["pairs"]]
     if config.get("design"):
         targets += ["results/design/design.json", "results/design/designs.csv",
                     "results/design/pareto.png"]
@@ -230,6 +254,10 @@ REPORT_FIGURES = {
     "fig6": ("results/figures/fig6_position.png", "fig6.rst", "Paper 000", None),
     "fig7": ("results/figures/fig7_derivatives.png", "fig7.rst", "Paper 000", None),
     "design_pareto": ("results/design/pareto.png", "design_pareto.rst", "Design", None),
+    "rig_map": ("results/rigs/{rig}/{channel}/map.png", "rig_map.rst", "Rigs", "{log_id}"),
+    "rig_compliance": ("results/rigs/{rig}/{channel}/compliance.png", "rig_compliance.rst", "Rigs", "{log_id}"),
+    "rig_heldout": ("results/rigs/{rig}/{channel}/heldout.png", "rig_heldout.rst", "Rigs", "{log_id}"),
+    "rig_remains": ("results/rigs/{rig}/{channel}/remains.png", "rig_remains.rst", "Rigs", "{log_id}"),
 }
 THUMBNAIL_WIDTH = 480
 
@@ -244,10 +272,14 @@ def report_figures():
         "ratio_figure": [{}] if QUANT_IDS else [],
         "fig6": [{}] if paper_figures_apply() else [],
         "design_pareto": [{}] if config.get("design") else [],
+        # a rig's thumbnails are named <rig>/<channel>.png (log_id = the rig's name)
+        "rig_map": [{"log_id": name, "rig": name, "channel": p["measured"]}
+                    for name, rig in RIGS.items() for p in rig["pairs"]],
     }
     for kind, same in (("log_comparison", "log_errors"), ("lrde_dwell", "lrde_corner"),
                        ("lrde_bias_cycles", "lrde_corner"),
-                       ("residual_before_after", "residual_diagnostics"), ("fig7", "fig6")):
+                       ("residual_before_after", "residual_diagnostics"), ("fig7", "fig6"),
+                       ("rig_compliance", "rig_map"), ("rig_heldout", "rig_map"), ("rig_remains", "rig_map")):
         instances[kind] = instances[same]
     out = {}
     for kind, (pattern, *_) in REPORT_FIGURES.items():

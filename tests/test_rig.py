@@ -1,0 +1,302 @@
+"""Rig fit (enclab.residuals.rig, enclab.residuals.calibration) on small simulated rigs.
+
+The simulated rig (``rig.simulate_rig``) has a known scale, calibration map, softening
+compliance against two torques, and per-run play widths and latencies; the truth is read on the
+MRDLab motor grid (0.0428 mrad) and the measured side on an 8192-cpr grid (0.767 mrad).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from enclab.residuals import calibration as cal
+from enclab.residuals import rig
+
+STEP = 2 * math.pi / 8192
+TRUTH_STEP = 2 * math.pi / 146860
+COMP = {"torque_back:linear": 0.09, "torque_back:signed_square": -0.9, "torque_front:linear": -0.2}
+SPEC_COMP = {"torque_back": ["linear", "signed_square"], "torque_front": ["linear"]}
+CONDS = [{"frequency_hz": f, "load": L} for f in (0.5, 0.75, 1.0) for L in (0.0, 0.3, 0.6)]
+
+
+def true_map(y):
+    return 0.003 * np.sin(2 * np.pi * y / 0.25) + 0.002 * np.cos(2 * np.pi * y / 0.6)
+
+
+@pytest.fixture(scope="module")
+def sim_rig():
+    runs = rig.simulate_rig(np.random.default_rng(7), CONDS, step=STEP, truth_step=TRUTH_STEP,
+                            scale=0.02, map_fn=true_map, compliance=COMP,
+                            play_width=[0.02, 0.025, 0.03], latency=0.001)
+    return runs
+
+
+@pytest.fixture(scope="module")
+def sim_fit(sim_rig):
+    spec = rig.RigSpec(spacing=0.05, compliance=SPEC_COMP)
+    return rig.fit_rig(sim_rig[:7], spec)
+
+
+# ----------------------------------------------------------------------------- calibration
+
+
+def test_map_basis_has_no_constant_or_linear_part_and_reproduces_splines():
+    basis = cal.MapBasis(0.0, 1.0, 0.1)
+    grid = np.linspace(0.0, 1.0, basis.n_grid)
+    D = basis.design(grid)
+    # 11 intervals of cubic B-splines: 13 functions, minus the constant and the slope
+    assert D.shape[1] == len(basis.knots) - 4 - 2
+    lin = np.column_stack([np.ones_like(grid), grid])
+    assert np.max(np.abs(lin.T @ D)) < 1e-8 * grid.size
+    # a cubic spline on these knots, with its constant and linear part removed, is reproduced
+    rng = np.random.default_rng(0)
+    from scipy.interpolate import BSpline
+
+    spl = BSpline(basis.knots, rng.standard_normal(len(basis.knots) - 4), 3)(grid)
+    c, *_ = np.linalg.lstsq(lin, spl, rcond=None)
+    target = spl - lin @ c
+    coef, *_ = np.linalg.lstsq(D, target, rcond=None)
+    assert np.max(np.abs(basis.curve(coef, grid) - target)) < 1e-10
+    # clamped outside the range
+    assert np.allclose(basis.design([-1.0, 2.0]), basis.design([0.0, 1.0]))
+    # a reference range: no linear part there, and no shape lost at the ends
+    inner = cal.MapBasis(0.0, 1.0, 0.1, ref=(0.2, 0.8))
+    ref = np.linspace(0.2, 0.8, inner.n_grid)
+    Dr = inner.design(ref)
+    assert inner.n_columns == D.shape[1]
+    assert np.max(np.abs(np.column_stack([np.ones_like(ref), ref]).T @ Dr)) < 1e-8 * ref.size
+
+
+def test_map_basis_rejects_bad_ranges():
+    with pytest.raises(ValueError, match="lo < hi"):
+        cal.MapBasis(1.0, 1.0, 0.1)
+    with pytest.raises(ValueError, match="spacing"):
+        cal.MapBasis(0.0, 1.0, 0.0)
+    with pytest.raises(ValueError, match="reference range"):
+        cal.MapBasis(0.0, 1.0, 0.1, ref=(-0.1, 0.5))
+
+
+def test_compliance_columns_and_curve():
+    T = np.array([-0.1, 0.0, 0.05])
+    cols = cal.compliance_columns({"tb": ["linear", "signed_square"]}, {"tb": T})
+    assert np.allclose(cols, np.column_stack([T, T * np.abs(T)]))
+    assert np.allclose(cal.compliance_curve([0.09, -0.9], {"tb": ["linear", "signed_square"]}, "tb", T),
+                       0.09 * T - 0.9 * T * np.abs(T))
+    with pytest.raises(ValueError, match="cubic"):
+        cal.compliance_names({"tb": ["cubic"]})
+    with pytest.raises(ValueError, match="torque channel 'tf'"):
+        cal.compliance_columns({"tf": ["linear"]}, {"tb": T})
+
+
+# ----------------------------------------------------------------------------- masks, folds
+
+
+def test_steady_mask_fraction_of_a_sine():
+    # After a turning point of A sin, the travel A (1 - cos phi) exceeds d once
+    # phi > arccos(1 - d / A): that fraction of each half cycle is missing.
+    A, d, f = 0.5, 0.06, 0.5
+    t = np.arange(0, 40.0, 1e-3)
+    theta = A * np.sin(2 * np.pi * f * t)
+    mask = rig.steady_mask(t, theta, travel=d, t_skip=2.0)
+    expected = 1 - math.acos(1 - d / A) / math.pi
+    assert mask[t >= 2.0].mean() == pytest.approx(expected, abs=2e-3)
+    assert not mask[t < 2.0].any()
+
+
+def test_make_folds_by_condition_and_leave_one_out(sim_rig):
+    folds = rig.make_folds(sim_rig, [
+        {"name": "freq", "by": "frequency_hz", "train": [0.5, 1.0], "test": [0.75]},
+        {"name": "load", "by": "load"},
+        {"name": "loro", "leave_one_run_out": True}])
+    freq = [f for f in folds if f["split"] == "freq"]
+    assert len(freq) == 1 and len(freq[0]["train"]) == 6 and len(freq[0]["test"]) == 3
+    load = [f for f in folds if f["split"] == "load"]
+    assert len(load) == 3 and all(len(f["test"]) == 3 and not set(f["test"]) & set(f["train"]) for f in load)
+    loro = [f for f in folds if f["split"] == "loro"]
+    assert len(loro) == len(sim_rig) and all(len(f["train"]) == len(sim_rig) - 1 for f in loro)
+    with pytest.raises(ValueError, match="condition 'torque'"):
+        rig.make_folds(sim_rig, [{"name": "x", "by": "torque"}])
+    with pytest.raises(ValueError, match="no run with frequency_hz"):
+        rig.make_folds(sim_rig, [{"by": "frequency_hz", "train": [9.0], "test": [0.5]}])
+
+
+# ----------------------------------------------------------------------------- the fit
+
+
+def test_per_run_effects_recovered(sim_fit):
+    widths = [0.02, 0.025, 0.03]
+    for i, run_id in enumerate(sim_fit.train_ids):
+        per = sim_fit.per_run[run_id]
+        # the reading is scaled by 1 + scale (+ the map's slope) relative to the output angle
+        assert per["play_width"] == pytest.approx(widths[i % 3], rel=0.05)
+        assert per["latency"] == pytest.approx(1e-3, rel=0.1)
+
+
+def test_softening_compliance_recovered_within_its_interval(sim_fit):
+    ci = sim_fit.ci()
+    shared = sim_fit.shared()
+    for name, true in COMP.items():
+        lo, hi = ci[name]
+        sd = (hi - lo) / (2 * 1.6449)
+        # the delete-one-run jackknife is the error estimate: 3 sd (99.7 %) around the estimate
+        assert abs(shared[name] - true) < 3 * sd, (name, shared[name], true, sd)
+        # and the interval is informative: the sign of each term is pinned down
+        assert hi - lo < abs(true)
+
+
+def test_calibration_map_recovered_within_its_band(sim_fit):
+    lo, hi = sim_fit.basis.lo, sim_fit.basis.hi
+    a = np.linspace(lo + 0.02, hi - 0.02, 400)
+    curve, band_lo, band_hi = sim_fit.map_curve(a)
+    # The fitted map is a function of the reading a = g(y) = y + s (y - A) + m(y): the truth is
+    # r(a) = a - g^-1(a), with its constant and linear part (over the reference range) removed.
+    y = np.linspace(-0.2, 1.2, 20001)
+    g = y + 0.02 * (y - 0.5) + true_map(y)
+    grid = np.linspace(*sim_fit.basis.ref, 2001)
+    r_grid = np.interp(grid, g, g - y)
+    lin = np.column_stack([np.ones_like(grid), grid])
+    c, *_ = np.linalg.lstsq(lin, r_grid, rcond=None)
+    target = np.interp(a, g, g - y) - np.column_stack([np.ones_like(a), a]) @ c
+    sd = (band_hi - band_lo) / (2 * 1.6449)
+    # the map has 5 mrad of shape; it is recovered to a fraction of that, and within 4 sd of the
+    # jackknife band everywhere (400 correlated points: a simultaneous, not pointwise, level)
+    assert np.std(target) > 1.5e-3
+    assert np.sqrt(np.mean((curve - target) ** 2)) < 0.1 * np.std(target)
+    assert np.all(np.abs(curve - target) < 4 * sd + 2e-5)
+    # scale: the linear part of r(a)
+    assert sim_fit.shared()["scale"] == pytest.approx(c[1], abs=5e-4)
+
+
+def test_held_out_runs_reach_the_quantization_floor(sim_rig, sim_fit):
+    spec = sim_fit.spec
+    floor = rig.floor_std(STEP, TRUTH_STEP)
+    for run in sim_rig[7:]:
+        pred, per = rig.predict_run(sim_fit, run)
+        sc = rig.score_run(run, pred, spec)
+        # uniform quantization error: std estimate over ~2000 correlated samples within 15 %
+        assert sc["steady_std"] == pytest.approx(floor, rel=0.15)
+        assert sc["all_std"] < 2 * floor
+
+
+def test_held_out_scoring_is_honest(sim_rig, sim_fit):
+    # A held-out run whose map differs from the rig's must show the difference: the shared
+    # terms are not refitted on it (only its offset, play and latency are).
+    run = sim_rig[8]
+    bump = 0.002 * np.sin(2 * np.pi * run.measured / 0.3)
+    odd = rig.Run(run.run_id, run.t, run.truth, STEP * np.round((run.measured + bump) / STEP), STEP,
+                  TRUTH_STEP, run.torques, run.conditions)
+    pred, _ = rig.predict_run(sim_fit, odd)
+    sc = rig.score_run(odd, pred, sim_fit.spec)
+    floor = rig.floor_std(STEP, TRUTH_STEP)
+    expected = math.sqrt(floor**2 + np.var(bump))
+    assert sc["all_std"] == pytest.approx(expected, rel=0.2)
+
+
+def test_map_and_compliance_improve_held_out_score(sim_rig):
+    folds = rig.make_folds(sim_rig, [{"name": "freq", "by": "frequency_hz", "train": [0.5, 1.0], "test": [0.75]}])
+    full = rig.RigSpec(spacing=0.05, compliance=SPEC_COMP)
+    rows_full, out = rig.evaluate(sim_rig, full, folds)
+    rows_bare, _ = rig.evaluate(sim_rig, full.with_(spacing=None, compliance={}), folds)
+    p_full, p_bare = rig.pooled(rows_full), rig.pooled(rows_bare)
+    floor = rig.floor_std(STEP, TRUTH_STEP)
+    assert p_full["steady_std"] < 1.15 * floor < p_bare["steady_std"]
+    assert all(r["steady_std"] < r["before_steady_std"] for r in rows_full)
+    spread = rig.fold_spread(out)
+    assert set(spread) == {"scale", *COMP}
+
+
+def test_knot_spacing_chosen_on_held_out_runs(sim_rig):
+    spec = rig.RigSpec(spacing=0.05, compliance=SPEC_COMP)
+    best, scores = rig.choose_spacing(sim_rig[:6], spec, [0.5, 0.2, 0.05])
+    # a 0.25 rad period needs knots closer than about a quarter period
+    assert best == 0.05
+    assert scores[0.5] > 2 * scores[0.05]
+
+
+def test_run_rejects_bad_input():
+    t = np.arange(5) * 1e-3
+    with pytest.raises(ValueError, match="measured has shape"):
+        rig.Run("r", t, np.zeros(5), np.zeros(4), STEP)
+    with pytest.raises(ValueError, match="truth is not finite at row 2"):
+        rig.Run("r", t, np.array([0, 0, np.nan, 0, 0.0]), np.zeros(5), STEP)
+
+
+def test_reversal_travel_of_a_sine():
+    t = np.arange(0, 4.0, 1e-3)
+    theta = 0.5 * np.sin(2 * np.pi * 0.5 * t)
+    travel, direction = rig.reversal_travel(theta)
+    # after the peak at t = 0.5 s, travel is 0.5 (1 - cos(pi (t - 0.5)))
+    sel = (t > 0.6) & (t < 1.4)
+    assert np.allclose(travel[sel], 0.5 * (1 - np.cos(np.pi * (t[sel] - 0.5))), atol=1e-6)
+    assert np.all(direction[sel] == -1) and np.all(direction[(t > 1.6) & (t < 2.4)] == 1)
+
+
+def test_reversal_transient_recovered(sim_rig):
+    # a mean motion inside the play, the same after every reversal: a 2 mrad bump over the first
+    # 0.04 rad of travel, odd in the direction
+    def bump(run):
+        travel, direction = rig.reversal_travel(run.truth)
+        return direction * np.where(travel < 0.04, 2e-3 * np.sin(np.pi * travel / 0.04) ** 2, 0.0)
+
+    runs = [rig.Run(r.run_id, r.t, r.truth, STEP * np.round((r.measured + bump(r)) / STEP), STEP,
+                    TRUTH_STEP, r.torques, r.conditions) for r in sim_rig]
+    spec = rig.RigSpec(spacing=0.05, compliance=SPEC_COMP)
+    with_t = spec.with_(transient=0.005)
+    fit0, fit1 = rig.fit_rig(runs[:7], spec), rig.fit_rig(runs[:7], with_t)
+    s0 = [rig.score_run(r, rig.predict_run(fit0, r)[0], spec)["all_std"] for r in runs[7:]]
+    s1 = [rig.score_run(r, rig.predict_run(fit1, r)[0], with_t)["all_std"] for r in runs[7:]]
+    floor = rig.floor_std(STEP, TRUTH_STEP)
+    # 2 x 2000 samples: the std of a uniform error is known to a few per cent
+    assert max(s1) < 1.05 * floor and min(s0) > 1.3 * floor
+
+
+def test_shared_latency_recovered(sim_rig):
+    spec = rig.RigSpec(spacing=0.05, compliance=SPEC_COMP, latency="shared")
+    fit = rig.fit_rig(sim_rig[:7], spec)
+    # every run has 1 ms; the reading's slope (1.02 and the map's) scales it by a few per cent
+    assert fit.shared()["latency"] == pytest.approx(1e-3, rel=0.1)
+    assert all(v["latency"] == 0.0 for v in fit.per_run.values())
+    lo, hi = fit.ci()["latency"]
+    assert lo < fit.shared()["latency"] < hi
+
+
+def test_rig_report_tables_figures_and_words(sim_rig):
+    from enclab.residuals import rig_report
+
+    runs = [sim_rig[i] for i in (0, 1, 3, 4)]
+    spec = rig.RigSpec(spacing=0.1, compliance=SPEC_COMP, latency="shared", transient=0.01)
+    out = rig_report.report_rig("sim", "theta_out", runs, spec,
+                                [{"name": "freq", "by": "frequency_hz", "train": [0.5], "test": [0.75]}],
+                                [0.3, 0.05], truth_counts_per_rev=146860)
+    block = out["block"]
+    assert [s["split"] for s in block["splits"]] == ["freq"]
+    split = block["splits"][0]
+    assert split["test_runs"] == 2 and split["after_all"] < split["before_all"]
+    assert block["final"]["spacing"] == 0.05
+    assert len(block["final"]["map"]["curve"]) == 101
+    cond = out["tables"]["conditions"]
+    assert set(cond["condition"]) == {"frequency_hz", "load"}
+    assert set(cond[cond["condition"] == "load"]["value"]) == {0.0, 0.3}
+    rem = block["remains"]["freq"]
+    assert 0 < rem["window_share"] < 1 and rem["window_fraction"] < 0.5
+    assert [len(f.axes) for f in out["figures"].values()] == [1, 2, 1, 1]
+    text = out["markdown"]
+    assert "## Held out" in text and "## What remains" in text and "counts per" in text
+
+
+def test_remains_separates_repeatable_from_random_motion_in_the_play(sim_rig):
+    from enclab.residuals.rig_report import remains
+
+    spec = rig.RigSpec()
+    rng = np.random.default_rng(0)
+    same, random = {}, {}
+    for run in sim_rig[:4]:
+        travel, direction = rig.reversal_travel(run.truth)
+        win = travel < spec.travel
+        same[run.run_id] = np.where(win, direction * 1e-3 * np.sin(np.pi * travel / spec.travel), 0.0)
+        random[run.run_id] = np.where(win, 1e-3 * rng.standard_normal(run.t.size), 0.0)
+    assert remains(sim_rig[:4], same, spec)["repeatable_share"] > 0.95
+    assert remains(sim_rig[:4], random, spec)["repeatable_share"] < 0.1
+    assert remains(sim_rig[:4], same, spec)["window_share"] > 0.99

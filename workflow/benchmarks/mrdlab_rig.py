@@ -1,0 +1,169 @@
+"""MRDLab da Vinci tool as a rig: the CUI output encoder of all 20 runs fitted together.
+
+The 20 runs of ``Tool_4_Maryland_L_2`` (5 frequencies x 4 reaction-torque levels, the rig
+``mrdlab_tool4`` of ``data/manifest.real.yaml``) against the back-end motor encoder through the
+35:1 gear. A ladder of rig models (:mod:`enclab.residuals.rig`), each fitted on training runs and
+scored on held-out runs:
+
+- ``play+scale``: per-run offset and play width, shared scale;
+- ``+map``: and the calibration map of the measured-side angle (knots every 0.05 rad);
+- ``+map+torque+lag``: and the compliance (``T`` and ``T|T|`` of the back torque, ``T`` of the
+  front torque) and a per-run latency;
+- ``rig`` (the rig rule's model): the compliance, one latency for the rig, the reversal transient
+  (knots every 4 mrad of motor travel), and the map's knot spacing chosen per fold on the
+  training runs (leave-one-run-out); ``rig, per-run latency`` the same with a latency per run.
+
+Splits: frequency (train 0.1/0.3/0.5 Hz, test 0.2/0.4 Hz) and load (train 10/20 %, test 30/40 %);
+``--loro`` runs leave-one-run-out folds instead (knot spacing fixed at 0.05 rad, ``--loro-max``
+of them, every k-th run held out) for the spread of the shared parameters.
+
+Writes ``results/benchmarks/mrdlab_rig.csv`` (held-out residual std per model, split and
+condition, with the targets) and ``results/benchmarks/mrdlab_rig_params.csv`` (the shared
+parameters of each fold and their spread), and copies both to ``--copy-to`` when given.
+
+Usage (from the repository root; needs ../shared/data/real)::
+
+    .venv/bin/python workflow/benchmarks/mrdlab_rig.py
+    .venv/bin/python workflow/benchmarks/mrdlab_rig.py --models rig --loro --suffix _loro
+"""
+from __future__ import annotations
+
+import argparse
+import shutil
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import yaml
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from provenance import stamp  # noqa: E402
+
+from enclab import io  # noqa: E402
+from enclab.residuals import rig  # noqa: E402
+from enclab.residuals.rig_manifest import rig_groups  # noqa: E402
+from enclab.residuals.rig_report import remains, split_table  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[2]
+RIG = "mrdlab_tool4"
+COMP = {"torque_back": ["linear", "signed_square"], "torque_front": ["linear"]}
+SPACINGS = [0.2, 0.1, 0.07, 0.05, 0.035]
+MODELS = {
+    "play+scale": (rig.RigSpec(spacing=None, latency=False), None),
+    "+map": (rig.RigSpec(spacing=0.05, latency=False), None),
+    "+map+torque+lag": (rig.RigSpec(spacing=0.05, compliance=COMP), None),
+    "rig": (rig.RigSpec(spacing=0.05, compliance=COMP, latency="shared", transient=0.004), SPACINGS),
+    "rig, per-run latency": (rig.RigSpec(spacing=0.05, compliance=COMP, transient=0.004), SPACINGS),
+}
+# Done-when targets (steady, all) in rad and the independent study's reference for the full model
+TARGETS = {"frequency": (0.55e-3, 1.20e-3), "load": (0.70e-3, 1.45e-3)}
+STUDY = {("play+scale", "frequency"): (1.56e-3, 1.89e-3), ("+map", "frequency"): (0.78e-3, 1.28e-3),
+         ("+map+torque+lag", "frequency"): (0.58e-3, 1.25e-3), ("+map+torque+lag", "load"): (0.73e-3, 1.52e-3)}
+
+
+def load_runs() -> tuple[list[rig.Run], list[dict]]:
+    config = yaml.safe_load((ROOT / "config.yaml").read_text())
+    data_root, entries = io.read_manifest(ROOT / "data" / "manifest.real.yaml", devices=config["devices"])
+    group = rig_groups(entries)[RIG]
+    by_id = {e["id"]: e for e in entries}
+    pair = group["pairs"][0]
+    runs = []
+    for member in group["runs"]:
+        df, meta = io.ingest_log(by_id[member["log_id"]], ROOT / data_root, config["devices"])
+        runs.append(rig.run_from_canonical(df, meta, pair["measured"], pair["truth"], list(COMP),
+                                           member["conditions"], member["log_id"]))
+    return runs, group["splits"]
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--models", nargs="+", default=list(MODELS), choices=list(MODELS))
+    parser.add_argument("--loro", action="store_true",
+                        help="leave-one-run-out folds instead of the condition splits (spacing fixed)")
+    parser.add_argument("--loro-max", type=int, default=10, help="at most this many leave-one-run-out folds")
+    parser.add_argument("--out", type=Path, default=ROOT / "results" / "benchmarks")
+    parser.add_argument("--copy-to", type=Path, default=None)
+    parser.add_argument("--suffix", default="", help="appended to the CSV names (e.g. _loro)")
+    args = parser.parse_args(argv)
+    if not (ROOT.parent / "shared" / "data" / "real").is_dir():
+        print("../shared/data/real is absent: nothing to analyse", file=sys.stderr)
+        return 1
+    runs, splits = load_runs()
+    rows, params = [], []
+    for model in args.models:
+        spec, spacings = MODELS[model]
+        start = time.perf_counter()
+        if args.loro:
+            # Leave-one-run-out folds only, the knot spacing fixed (0.05 rad), every k-th run held
+            # out (--loro-max folds): the spread of the shared parameters over many training sets.
+            folds = rig.make_folds(runs, [{"name": "runs", "leave_one_run_out": True}])
+            folds = folds[::max(len(folds) // args.loro_max, 1)][:args.loro_max]
+            res, out = rig.evaluate(runs, spec, folds, None, keep_residuals=True)
+        else:
+            res, out = rig.evaluate(runs, spec, rig.make_folds(runs, splits), spacings, keep_residuals=True)
+        seconds = time.perf_counter() - start
+        table = split_table(res)
+        for _, r in table.iterrows():
+            split = r["split"]
+            target = TARGETS.get(split)
+            study = STUDY.get((model, split))
+            res_split = {k: v for f in out if f["split"] == split for k, v in f["residuals"].items()}
+            rem = remains(runs, res_split, spec) if split in TARGETS else {}
+            rows.append({"model": model, "split": split, "condition": "all test runs", "value": "",
+                         "runs": int(r["test_runs"]), "before_steady": r["before_steady"],
+                         "before_all": r["before_all"], "steady": r["after_steady"], "all": r["after_all"],
+                         "floor": r["floor"],
+                         "target_steady": target[0] if target else None, "target_all": target[1] if target else None,
+                         "met": bool(target and r["after_steady"] <= target[0] and r["after_all"] <= target[1]),
+                         "study_steady": study[0] if study else None, "study_all": study[1] if study else None,
+                         "window_share": rem.get("window_share"), "repeatable_share": rem.get("repeatable_share"),
+                         "window_std": rem.get("window_std"), "outside_std": rem.get("outside_std"),
+                         "seconds": seconds})
+        df = pd.DataFrame(res)
+        for split, sel in df[df["role"] == "test"].groupby("split", sort=False):
+            if split not in TARGETS:
+                continue
+            for cond in ("frequency_hz", "load_pct"):
+                for value, grp in sel.groupby(cond):
+                    p = rig.pooled(grp.to_dict("records"))
+                    rows.append({"model": model, "split": split, "condition": cond, "value": value,
+                                 "runs": len(grp),
+                                 "before_steady": float(np.sqrt(np.mean(grp["before_steady_std"] ** 2))),
+                                 "before_all": float(np.sqrt(np.mean(grp["before_all_std"] ** 2))),
+                                 "steady": p["steady_std"], "all": p["all_std"],
+                                 "floor": float(grp["floor_std"].iloc[0])})
+        cond_folds = [f for f in out if f["split"] in TARGETS]
+        spread = rig.fold_spread(cond_folds)
+        loro_spread = rig.fold_spread([f for f in out if f["split"] == "runs"]) if args.loro else {}
+        for f in out:
+            fit = f["fit"]
+            ci = fit.ci()
+            widths = [v["play_width"] for v in fit.per_run.values()]
+            lat = [v["latency"] for v in fit.per_run.values()]
+            for name, value in {**fit.shared(), "play_width_mean": float(np.mean(widths)),
+                                **({"latency_mean": float(np.mean(lat))} if spec.latency is True else {})}.items():
+                if name.startswith("transient"):
+                    continue
+                params.append({"model": model, "split": f["split"], "fold": str(f["fold"]),
+                               "spacing": f["spacing"], "parameter": name, "value": value,
+                               "ci_lo": ci.get(name, (None, None))[0], "ci_hi": ci.get(name, (None, None))[1],
+                               "spread_over_condition_folds": spread.get(name, {}).get("rel_dev"),
+                               "spread_over_loro_folds": loro_spread.get(name, {}).get("rel_dev")})
+        print(f"{model}: {seconds:.0f} s", file=sys.stderr)
+        print(table.to_string(), file=sys.stderr)
+        print({k: round(v["rel_dev"], 3) for k, v in spread.items() if not k.startswith("transient")}, file=sys.stderr)
+    args.out.mkdir(parents=True, exist_ok=True)
+    outputs = {f"mrdlab_rig{args.suffix}.csv": pd.DataFrame(rows),
+               f"mrdlab_rig_params{args.suffix}.csv": pd.DataFrame(params)}
+    for name, frame in outputs.items():
+        io.write_table(stamp(frame), args.out / name)
+        if args.copy_to:
+            args.copy_to.mkdir(parents=True, exist_ok=True)
+            shutil.copy(args.out / name, args.copy_to / name)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

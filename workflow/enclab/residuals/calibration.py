@@ -1,0 +1,154 @@
+"""Shared terms of a rig: a smooth calibration map of an angle and a nonlinear compliance.
+
+Both are *linear* in their coefficients, so a rig fit (:mod:`enclab.residuals.rig`) stacks
+their columns over many runs and solves one least-squares problem.
+
+**Calibration map** (:class:`MapBasis`). A repeatable error of the measured side that depends on
+its own angle ``a``: ``reading = a + s (a - a_mid) + m(a)``. ``m`` is a cubic spline with knots
+every ``spacing`` rad over ``[lo, hi]``, with its constant and linear parts removed (on a uniform
+grid over ``[lo, hi]`` or a reference range inside it): the constant is a counter's zero (fitted per run), the linear part is
+the scale ``s`` (a counts-per-rev or gear-ratio mismatch), reported on its own. What is left,
+``m``, is the shape no scale or offset can make: the curve a lab applies as a calibration.
+*Signature* when present and not modelled: a residual that is the same function of the angle in
+every run and both directions of motion, and is not periodic in the other side's angle.
+
+**Nonlinear compliance** (:func:`compliance_columns`). The twist between the two sides of a
+transmission against logged torques: ``k1 T + k2 T|T|`` for a torque ``T`` (a spring that
+softens or stiffens with load: play taken up gradually shows as ``k2`` of sign opposite to
+``k1``), and a linear term per further torque channel. *Signature*: a residual that follows the
+torque, the same at every angle.
+
+Every function is pure: arrays in, arrays out.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+from scipy.interpolate import BSpline
+
+__all__ = ["MapBasis", "TERMS", "compliance_columns", "compliance_names", "compliance_curve"]
+
+#: Torque terms of the compliance: name -> function of the torque (N m) giving a column.
+TERMS = {
+    "linear": lambda T: T,
+    "signed_square": lambda T: T * np.abs(T),
+}
+
+
+@dataclass(frozen=True)
+class MapBasis:
+    """Cubic B-spline basis on ``[lo, hi]`` with knots every ``spacing`` (rad), constant and
+    linear parts removed.
+
+    The B-splines of one knot vector reproduce every linear function, so removing the span of
+    ``{1, a}`` leaves ``n_basis - 2`` directions: the columns of :meth:`design` are those
+    directions (orthonormal on the grid), full rank on data that cover the range. Outside
+    ``[lo, hi]`` the argument is clamped to the range (the map is held at its end values).
+
+    Parameters
+    ----------
+    lo, hi : float
+        Range of the angle (rad), ``lo < hi``.
+    spacing : float
+        Knot spacing (rad); the interior knots divide ``[lo, hi]`` into
+        ``ceil((hi - lo) / spacing)`` equal intervals.
+    n_grid : int
+        Points of the uniform grid on which the constant and linear parts are removed.
+    ref : tuple of float or None
+        ``(lo, hi)`` of that grid (default the whole range). The ends of a stroke are where a
+        motion reverses and where the data say least about the map; the scale is better
+        defined as the slope over the well-covered middle.
+    """
+
+    lo: float
+    hi: float
+    spacing: float
+    n_grid: int = 2001
+    ref: tuple | None = None
+
+    def __post_init__(self):
+        if not (np.isfinite(self.lo) and np.isfinite(self.hi) and self.hi > self.lo):
+            raise ValueError(f"map range must satisfy lo < hi, got lo={self.lo!r}, hi={self.hi!r}")
+        if self.ref is not None and not (self.lo <= self.ref[0] < self.ref[1] <= self.hi):
+            raise ValueError(f"map reference range {self.ref!r} must lie inside [{self.lo!r}, {self.hi!r}]")
+        if not (np.isfinite(self.spacing) and self.spacing > 0):
+            raise ValueError(f"knot spacing must be positive, got spacing={self.spacing!r}")
+
+    @property
+    def knots(self) -> np.ndarray:
+        n_int = max(int(np.ceil((self.hi - self.lo) / self.spacing - 1e-9)), 1)
+        inner = np.linspace(self.lo, self.hi, n_int + 1)
+        return np.concatenate(([self.lo] * 3, inner, [self.hi] * 3))
+
+    def _raw(self, a) -> np.ndarray:
+        a = np.clip(np.asarray(a, dtype=np.float64), self.lo, self.hi)
+        return BSpline.design_matrix(a, self.knots, 3).toarray()
+
+    @cached_property
+    def _projection(self):
+        ref = np.linspace(*(self.ref or (self.lo, self.hi)), self.n_grid)
+        coef, *_ = np.linalg.lstsq(np.column_stack([np.ones_like(ref), ref]), self._raw(ref), rcond=None)
+        # Directions on the whole range: a B-spline outside the reference range is still a shape.
+        grid = np.linspace(self.lo, self.hi, self.n_grid)
+        resid = self._raw(grid) - np.column_stack([np.ones_like(grid), grid]) @ coef
+        _, sv, vt = np.linalg.svd(resid, full_matrices=False)
+        keep = sv > sv[0] * 1e-9
+        # Columns scaled to unit rms on the grid: coefficients are then in rad.
+        rot = vt[keep].T / sv[keep] * np.sqrt(self.n_grid)
+        return coef, rot
+
+    @property
+    def n_columns(self) -> int:
+        return self._projection[1].shape[1]
+
+    def design(self, a) -> np.ndarray:
+        """Columns of the map at angles ``a``: shape ``(len(a), n_columns)``."""
+        coef, rot = self._projection
+        a = np.asarray(a, dtype=np.float64)
+        ac = np.clip(a, self.lo, self.hi)
+        raw = self._raw(ac)
+        return (raw - np.column_stack([np.ones_like(ac), ac]) @ coef) @ rot
+
+    def curve(self, coef, a) -> np.ndarray:
+        """The map ``m(a)`` for coefficients ``coef`` (rad)."""
+        return self.design(a) @ np.asarray(coef, dtype=np.float64)
+
+
+def compliance_names(spec) -> list[str]:
+    """``["torque_back:linear", "torque_back:signed_square", ...]`` of a term spec
+    ``{channel: [term, ...]}`` (channel order as given)."""
+    out = []
+    for channel, terms in spec.items():
+        for term in terms:
+            if term not in TERMS:
+                raise ValueError(f"compliance term {term!r} of channel {channel!r}: expected one of {sorted(TERMS)}")
+            out.append(f"{channel}:{term}")
+    return out
+
+
+def compliance_columns(spec, torques) -> np.ndarray:
+    """Columns of the compliance for a term spec ``{channel: [term, ...]}`` and the logged
+    torques ``{channel: array (N m)}``: shape ``(N, n_terms)``."""
+    cols = []
+    for name in compliance_names(spec):
+        channel, term = name.split(":")
+        if channel not in torques:
+            raise ValueError(f"compliance needs torque channel {channel!r}; have {sorted(torques)}")
+        cols.append(TERMS[term](np.asarray(torques[channel], dtype=np.float64)))
+    if not cols:
+        return np.zeros((0, 0))
+    return np.column_stack(cols)
+
+
+def compliance_curve(coef, spec, channel, torque) -> np.ndarray:
+    """Twist (rad) against one torque channel alone: the sum of that channel's terms."""
+    names = compliance_names(spec)
+    torque = np.asarray(torque, dtype=np.float64)
+    out = np.zeros_like(torque)
+    for k, name in zip(coef, names):
+        ch, term = name.split(":")
+        if ch == channel:
+            out += k * TERMS[term](torque)
+    return out

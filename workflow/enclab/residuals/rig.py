@@ -1,0 +1,668 @@
+"""Rig fit: several runs of one rig analysed together, shared effects proven on held-out runs.
+
+A rig is a set of runs (logs) of one machine under different conditions (frequency, load, ...),
+each with a truth channel ``theta`` (e.g. a fine motor encoder through a gear) and a measured
+channel (e.g. an output encoder). The measured reading of run ``k`` is modelled as
+
+.. math::
+
+    y = P_{w_k}(\\theta) + c_k - \\tau_k \\dot P + s\\,(a - a_{mid}) + m(a) + \\sum_j \\kappa_j f_j(T)
+
+with **per-run** effects (they may change from run to run and are refitted on every run,
+held-out runs included): the offset ``c_k`` (a counter's zero), the play width ``w_k`` of a
+gear's backlash (:func:`enclab.residuals.effects.play_operator` ``P``) and the latency
+``tau_k`` (a delay of the measured side: ``y(t - tau) ~ y - tau * dy/dt``; or one latency for
+the rig, ``RigSpec(latency="shared")``); and **shared**
+effects (one value for the rig, fitted on training runs only and applied unchanged to held-out
+runs): the scale ``s``, the calibration map ``m`` of the measured-side angle ``a`` (the reading
+itself; :class:`enclab.residuals.calibration.MapBasis`) and the compliance coefficients
+``kappa`` against one or more logged torques (:func:`enclab.residuals.calibration.compliance_columns`).
+
+Fit: given the play widths, the model is linear; the per-run offset and latency are projected
+out run by run (Frisch-Waugh), so the shared coefficients solve one small normal-equation system
+summed over training runs, with each run's play-width step (the play's derivative in its
+width, linear) projected out too: Gauss-Newton on the widths, started from each run's own
+bounded search. Intervals of the shared terms (and the map's
+band) come from the delete-one-run jackknife over the training runs: the residual of a slow motion
+is strongly autocorrelated within a run, runs are the independent units.
+
+Scoring a held-out run refits only its per-run effects (3 parameters on thousands of samples)
+with every shared term fixed at its training value. Two residual std are reported:
+``steady`` (strokes where the play is taken up: more than ``travel`` rad of truth motion since the
+last reversal) and ``all`` (every sample after ``t_skip``). The residual is the *error*
+``reading - prediction`` (its floor is the quantization of both channels,
+``sqrt((step**2 + truth_step**2) / 12)``).
+
+Splits (:func:`make_folds`): by a condition (train on some values, test on others; or leave one
+value out) and leave-one-run-out.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import optimize
+
+from enclab.residuals.calibration import MapBasis, compliance_columns, compliance_names
+from enclab.residuals.effects import motion_sign, play_operator
+
+__all__ = ["Run", "RigSpec", "RigFit", "steady_mask", "fit_rig", "predict_run", "score_run",
+           "choose_spacing", "make_folds", "evaluate", "pooled", "fold_spread", "floor_std", "map_range",
+           "run_from_canonical"]
+
+
+@dataclass
+class Run:
+    """One run of a rig: time (s), truth and measured angles (rad), their steps, the logged
+    torques ``{channel: N m}`` and the run's conditions ``{name: value}``."""
+
+    run_id: str
+    t: np.ndarray
+    truth: np.ndarray
+    measured: np.ndarray
+    step: float
+    truth_step: float | None = None
+    torques: dict = field(default_factory=dict)
+    conditions: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.t = np.asarray(self.t, dtype=np.float64)
+        self.truth = np.asarray(self.truth, dtype=np.float64)
+        self.measured = np.asarray(self.measured, dtype=np.float64)
+        n = self.t.size
+        for name, arr in [("truth", self.truth), ("measured", self.measured)] + \
+                [(f"torque {k}", np.asarray(v)) for k, v in self.torques.items()]:
+            if arr.shape != (n,):
+                raise ValueError(f"run {self.run_id!r}: {name} has shape {arr.shape}, time has {n} samples")
+            if not np.all(np.isfinite(arr)):
+                raise ValueError(f"run {self.run_id!r}: {name} is not finite at row "
+                                 f"{int(np.flatnonzero(~np.isfinite(arr))[0])}")
+        if n < 3 or np.any(np.diff(self.t) <= 0):
+            raise ValueError(f"run {self.run_id!r}: time must hold >= 3 strictly increasing stamps")
+        self.torques = {k: np.asarray(v, dtype=np.float64) for k, v in self.torques.items()}
+
+
+@dataclass(frozen=True)
+class RigSpec:
+    """What the rig model contains.
+
+    Parameters
+    ----------
+    play, latency, scale : bool
+        Per-run play width and latency (``latency="shared"``: one latency for the rig, a
+        column ``-d theta / dt`` of the truth); the shared scale.
+    spacing : float or None
+        Knot spacing (rad) of the calibration map; ``None`` = no map.
+    compliance : dict
+        ``{torque channel: [term, ...]}`` (terms ``linear``, ``signed_square``); empty = none.
+    max_play : float
+        Upper bound of the play width (rad).
+    transient : float or None
+        Knot spacing (rad of truth travel) of a shared reversal transient: a spline in the
+        truth's travel since the last reversal, odd in the direction of motion, vanishing from
+        ``travel`` on (the mean motion of the measured side inside the play that a play
+        operator cannot follow); ``None`` = none.
+    travel, t_skip : float
+        Steady strokes: more than ``travel`` rad since the last reversal; every score leaves
+        out the first ``t_skip`` s (and the fit does too).
+    n_iter : int
+        Largest number of Gauss-Newton passes over the play widths (they stop when no width
+        moves by more than 1e-7 rad).
+    """
+
+    play: bool = True
+    latency: bool | str = True
+    scale: bool = True
+    spacing: float | None = 0.05
+    compliance: Mapping = field(default_factory=dict)
+    max_play: float = 0.08
+    transient: float | None = None
+    travel: float = 0.06
+    t_skip: float = 1.5
+    n_iter: int = 20
+
+    def with_(self, **kw) -> RigSpec:
+        d = {k: getattr(self, k) for k in self.__dataclass_fields__}
+        d.update(kw)
+        return RigSpec(**d)
+
+
+_CURVES = ("map", "transient")
+
+
+@dataclass
+class RigFit:
+    """Shared coefficients and the training runs' per-run effects of a rig fit."""
+
+    spec: RigSpec
+    names: list            # names of the shared coefficients
+    coef: np.ndarray       # shared coefficients
+    cov: np.ndarray | None  # delete-one-run jackknife covariance (None with < 3 runs)
+    basis: MapBasis | None
+    a_mid: float
+    per_run: dict          # run_id -> {"offset", "play_width", "latency"}
+    train_ids: list
+    jack_coef: np.ndarray | None = None  # (n_runs, n_coef) delete-one-run estimates
+
+    def shared(self) -> dict:
+        """``{name: value}`` of the scalar shared coefficients (scale, latency, compliance); the
+        map and the reversal transient are curves (:meth:`map_curve`)."""
+        return {n: float(c) for n, c in zip(self.names, self.coef) if not n.startswith(_CURVES)}
+
+    def ci(self, z: float = 1.6449) -> dict:
+        """``{name: (lo, hi)}`` 90 % intervals (jackknife) of the scalar shared coefficients."""
+        if self.cov is None:
+            return {}
+        sd = np.sqrt(np.diag(self.cov))
+        return {n: (float(c - z * s), float(c + z * s)) for n, c, s in zip(self.names, self.coef, sd)
+                if not n.startswith(_CURVES)}
+
+    def map_curve(self, a, z: float = 1.6449):
+        """The calibration map at ``a``: ``(curve, lo, hi)`` with a 90 % jackknife band (the
+        band is the curve itself when there is no interval)."""
+        a = np.asarray(a, dtype=np.float64)
+        if self.basis is None:
+            zero = np.zeros_like(a)
+            return zero, zero, zero
+        idx = [i for i, n in enumerate(self.names) if n.startswith("map")]
+        D = self.basis.design(a)
+        curve = D @ self.coef[idx]
+        if self.cov is None:
+            return curve, curve, curve
+        var = np.einsum("ij,jk,ik->i", D, self.cov[np.ix_(idx, idx)], D)
+        sd = np.sqrt(np.maximum(var, 0.0))
+        return curve, curve - z * sd, curve + z * sd
+
+
+def floor_std(step: float, truth_step: float | None) -> float:
+    """Std of the error ``reading - truth`` from quantization of both channels alone."""
+    return float(np.sqrt((step**2 + (truth_step or 0.0) ** 2) / 12.0))
+
+
+def steady_mask(t, truth, travel: float = 0.06, t_skip: float = 1.5) -> np.ndarray:
+    """Samples after ``t_skip`` with more than ``travel`` rad of truth motion since the last
+    reversal (a play narrower than ``travel`` is then taken up).
+
+    The distance from the last turning point reaches ``travel`` exactly when a play operator of
+    width ``travel`` is engaged again (its output rests ``travel / 2`` from the input on one side
+    and must cross to the other), which also ignores dithering of the truth near a reversal.
+    """
+    t = np.asarray(t, dtype=np.float64)
+    truth = np.asarray(truth, dtype=np.float64)
+    follow = play_operator(truth, travel)
+    return (t >= t[0] + t_skip) & (np.abs(truth - follow) >= 0.5 * travel * (1 - 1e-9))
+
+
+# ----------------------------------------------------------------------------- model pieces
+
+
+def reversal_travel(truth, hysteresis: float = 2e-4) -> tuple[np.ndarray, np.ndarray]:
+    """Truth travel since the last reversal (rad, >= 0) and the direction of motion (+1/-1).
+
+    A reversal is a change of direction of a play operator of width ``hysteresis`` (so that
+    the dithering of a truth reading at rest is not a reversal); the travel is measured from
+    the extreme of the truth before it.
+    """
+    x = np.asarray(truth, dtype=np.float64)
+    p = play_operator(x, hysteresis)
+    d = motion_sign(np.diff(p, prepend=p[0]))
+    d[d == 0] = 1.0
+    change = np.flatnonzero(np.diff(d) != 0) + 1
+    starts = np.concatenate(([0], change))
+    ends = np.concatenate((change, [x.size]))
+    travel = np.zeros_like(x)
+    prev = None
+    for s0, e0 in zip(starts, ends):
+        seg = x[s0:e0]
+        if prev is None:
+            turn = seg[0]
+        else:
+            turn = np.max(x[prev[0]:prev[1]]) if d[s0] < 0 else np.min(x[prev[0]:prev[1]])
+        travel[s0:e0] = np.maximum(d[s0] * (seg - turn), 0.0)
+        prev = (s0, e0)
+    return travel, d
+
+
+def transient_columns(truth, spacing: float, travel: float) -> np.ndarray:
+    """Columns of the reversal transient: cubic B-splines in the travel since the last
+    reversal on ``[0, travel]`` (knots every ``spacing``), times the direction; the two that do
+    not vanish with their slope at ``travel`` are dropped, so the transient ends smoothly."""
+    from scipy.interpolate import BSpline
+
+    dist, direction = reversal_travel(truth)
+    n_int = max(int(np.ceil(travel / spacing - 1e-9)), 1)
+    knots = np.concatenate(([0.0] * 3, np.linspace(0.0, travel, n_int + 1), [travel] * 3))
+    inside = dist < travel
+    B = np.zeros((dist.size, len(knots) - 4))
+    if inside.any():
+        B[inside] = BSpline.design_matrix(dist[inside], knots, 3).toarray()
+    return B[:, :-2] * direction[:, None]
+
+
+def _shared_columns(run: Run, spec: RigSpec, basis: MapBasis | None, a_mid: float):
+    names, cols = [], []
+    a = run.measured
+    if spec.scale:
+        names.append("scale")
+        cols.append((a - a_mid)[:, None])
+    if spec.latency == "shared":
+        names.append("latency")
+        cols.append(-np.gradient(run.truth, run.t)[:, None])
+    if basis is not None:
+        D = basis.design(a)
+        names += [f"map{j}" for j in range(D.shape[1])]
+        cols.append(D)
+    if spec.compliance:
+        names += compliance_names(spec.compliance)
+        cols.append(compliance_columns(spec.compliance, run.torques))
+    if spec.transient:
+        T = transient_columns(run.truth, spec.transient, spec.travel)
+        names += [f"transient{j}" for j in range(T.shape[1])]
+        cols.append(T)
+    X = np.hstack(cols) if cols else np.zeros((a.size, 0))
+    return names, X
+
+
+def _played(run: Run, width: float) -> tuple[np.ndarray, np.ndarray]:
+    """Played truth and its time derivative."""
+    p = play_operator(run.truth, width) if width > 0 else run.truth
+    return p, np.gradient(p, run.t)
+
+
+def _nuisance(spec: RigSpec, dp: np.ndarray) -> np.ndarray:
+    cols = [np.ones_like(dp)]
+    if spec.latency is True:
+        cols.append(-dp)
+    return np.column_stack(cols)
+
+
+def _project(N, *arrays):
+    """Residuals of ``arrays`` after least squares on the columns ``N`` (per-run nuisance)."""
+    q, _ = np.linalg.qr(N)
+    return [x - q @ (q.T @ x) for x in arrays]
+
+
+def _fit_mask(run: Run, spec: RigSpec) -> np.ndarray:
+    return run.t >= run.t[0] + spec.t_skip
+
+
+def _per_run(run: Run, spec: RigSpec, shared_pred: np.ndarray, around: float | None = None) -> dict:
+    """Per-run effects given the shared part of the prediction: the play width by a bounded
+    search (coarse grid, then Brent; ``around``: Brent within 2 mrad of a known width), the
+    offset and latency by least squares."""
+    mask = _fit_mask(run, spec)
+    z = run.measured - shared_pred
+
+    def solve(width):
+        p, dp = _played(run, width)
+        N = _nuisance(spec, dp)[mask]
+        beta, *_ = np.linalg.lstsq(N, (z - p)[mask], rcond=None)
+        res = (z - p)[mask] - N @ beta
+        return float(res @ res), beta
+
+    width = 0.0
+    if spec.play:
+        grid = np.linspace(0.0, spec.max_play, 17) if around is None else \
+            np.clip(np.array([around - 2e-3, around, around + 2e-3]), 0.0, spec.max_play)
+        rss = [solve(w)[0] for w in grid]
+        i = int(np.argmin(rss))
+        lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
+        res = optimize.minimize_scalar(lambda w: solve(w)[0], bounds=(lo, hi), method="bounded",
+                                       options={"xatol": 1e-6})
+        width = float(res.x) if res.fun <= rss[i] else float(grid[i])
+    _, beta = solve(width)
+    return {"offset": float(beta[0]), "play_width": width,
+            "latency": float(beta[1]) if spec.latency is True else 0.0}
+
+
+def _prediction(run: Run, spec: RigSpec, shared_pred: np.ndarray, per: Mapping) -> np.ndarray:
+    p, dp = _played(run, per["play_width"])
+    return p + per["offset"] - per["latency"] * dp + shared_pred
+
+
+def _play_derivative(p: np.ndarray) -> np.ndarray:
+    """``d P_w(theta) / d w``: ``-1/2`` times the side the play rests on (the direction of the
+    output's last motion), both while it follows the input and while it dwells."""
+    return -0.5 * motion_sign(np.diff(p, prepend=p[0]))
+
+
+def _normal_equations(runs, spec, basis, a_mid, widths, play_step: bool = False):
+    """Per-run ``(X'X, X'z, Xp, zp, q)`` of the shared columns after projecting out the run's
+    offset, latency and (``play_step``) the linearised play width (fit samples only)."""
+    out = []
+    names = None
+    for run in runs:
+        names, X = _shared_columns(run, spec, basis, a_mid)
+        p, dp = _played(run, widths[run.run_id])
+        m = _fit_mask(run, spec)
+        N = _nuisance(spec, dp)
+        if play_step and spec.play:
+            N = np.column_stack([N, _play_derivative(p)])
+        Xp, zp = _project(N[m], X[m], (run.measured - p)[m])
+        out.append((Xp.T @ Xp, Xp.T @ zp, Xp, zp, N[m], (run.measured - p)[m], X[m]))
+    return names, out
+
+
+def _solve(G, h):
+    if G.shape[0] == 0:
+        return np.zeros(0)
+    return np.linalg.lstsq(G, h, rcond=None)[0]
+
+
+def _jackknife(eqs):
+    G = sum(e[0] for e in eqs)
+    h = sum(e[1] for e in eqs)
+    n = len(eqs)
+    if n < 3 or G.shape[0] == 0:
+        return None, None
+    jack = np.array([_solve(G - g, h - hh) for g, hh, *_ in eqs])
+    d = jack - jack.mean(axis=0)
+    return (n - 1) / n * d.T @ d, jack
+
+
+def map_range(runs: Sequence[Run], t_skip: float = 0.0) -> tuple[float, float]:
+    """Range of the measured-side angle over ``runs`` (rad), samples after ``t_skip`` only
+    (those the fit sees: a map beyond them would be unconstrained)."""
+    keep = [r.measured[r.t >= r.t[0] + t_skip] for r in runs]
+    return (float(min(np.min(k) for k in keep)), float(max(np.max(k) for k in keep)))
+
+
+def make_basis(runs: Sequence[Run], spacing: float, t_skip: float = 0.0) -> MapBasis:
+    """The map's basis over the runs' range; its scale is the slope over the middle 90 % of
+    the range (the ends are where the motion reverses)."""
+    lo, hi = map_range(runs, t_skip)
+    return MapBasis(lo, hi, float(spacing), ref=(lo + 0.05 * (hi - lo), hi - 0.05 * (hi - lo)))
+
+
+def fit_rig(runs: Sequence[Run], spec: RigSpec, widths: Mapping | None = None) -> RigFit:
+    """Fit the rig model on ``runs`` (the training runs).
+
+    Parameters
+    ----------
+    runs : sequence of Run
+    spec : RigSpec
+    widths : dict, optional
+        Starting play widths per run id (default: each run's own fit without shared terms).
+
+    Returns
+    -------
+    RigFit
+    """
+    if not runs:
+        raise ValueError("a rig fit needs at least one run")
+    lo, hi = map_range(runs, spec.t_skip)
+    basis = make_basis(runs, spec.spacing, spec.t_skip) if spec.spacing else None
+    a_mid = 0.5 * (lo + hi)
+    zero = {r.run_id: np.zeros_like(r.t) for r in runs}
+    per = {r.run_id: _per_run(r, spec, zero[r.run_id]) for r in runs} if widths is None else \
+        {r.run_id: {"play_width": float(widths[r.run_id])} for r in runs}
+    coef = np.zeros(0)
+    names: list = []
+    eqs: list = []
+    # Gauss-Newton on the play widths: each pass solves the shared terms with every run's
+    # offset, latency and play-width step projected out, then moves the widths by their steps
+    # (an alternation of the two would converge slowly: widths and shared terms are coupled).
+    for _ in range(max(spec.n_iter, 1)):
+        w = {k: v["play_width"] for k, v in per.items()}
+        names, eqs = _normal_equations(runs, spec, basis, a_mid, w, play_step=True)
+        coef = _solve(sum(e[0] for e in eqs), sum(e[1] for e in eqs))
+        if not spec.play:
+            break
+        moved = 0.0
+        for run, e in zip(runs, eqs):
+            N, z, X = e[4], e[5], e[6]
+            beta, *_ = np.linalg.lstsq(N, z - X @ coef, rcond=None)
+            new = float(np.clip(w[run.run_id] + beta[-1], 0.0, spec.max_play))
+            moved = max(moved, abs(new - w[run.run_id]))
+            per[run.run_id] = {"play_width": new}
+        if moved < 1e-7:
+            break
+    shared = {r.run_id: _shared_columns(r, spec, basis, a_mid)[1] @ coef for r in runs}
+    per = {r.run_id: _per_run(r, spec, shared[r.run_id], around=per[r.run_id]["play_width"]) for r in runs}
+    cov, jack = _jackknife(eqs)
+    return RigFit(spec=spec, names=list(names), coef=coef, cov=cov, basis=basis, a_mid=a_mid,
+                  per_run=per, train_ids=[r.run_id for r in runs], jack_coef=jack)
+
+
+def predict_run(fit: RigFit, run: Run) -> tuple[np.ndarray, dict]:
+    """Prediction of a run with the shared terms of ``fit`` fixed and the run's own effects
+    (offset, play width, latency) fitted on it. Returns ``(prediction, per-run effects)``."""
+    _, X = _shared_columns(run, fit.spec, fit.basis, fit.a_mid)
+    shared = X @ fit.coef
+    per = _per_run(run, fit.spec, shared)
+    return _prediction(run, fit.spec, shared, per), per
+
+
+def score_run(run: Run, prediction: np.ndarray, spec: RigSpec) -> dict:
+    """``steady`` and ``all`` residual std (rad) of ``reading - prediction`` and sample counts."""
+    e = run.measured - prediction
+    steady = steady_mask(run.t, run.truth, spec.travel, spec.t_skip)
+    every = _fit_mask(run, spec)
+    return {"steady_std": float(np.std(e[steady])) if steady.any() else float("nan"),
+            "all_std": float(np.std(e[every])), "n_steady": int(steady.sum()), "n_all": int(every.sum()),
+            "steady_ss": float(np.sum((e[steady] - e[steady].mean()) ** 2)) if steady.any() else 0.0,
+            "all_ss": float(np.sum((e[every] - e[every].mean()) ** 2))}
+
+
+def choose_spacing(runs: Sequence[Run], spec: RigSpec, candidates: Sequence[float],
+                   widths: Mapping | None = None) -> tuple[float, dict]:
+    """Knot spacing of the map with the least leave-one-run-out error over ``runs``.
+
+    The play widths are held at those of a fit with ``spec`` (its own spacing); for each
+    candidate the shared terms are refitted without each run in turn (from the summed normal
+    equations, minus the run's), and the left-out run's residual is taken after refitting its own
+    offset and latency. Returns ``(best spacing, {spacing: held-out rms})``.
+    """
+    if len(runs) < 2:
+        raise ValueError("choosing the knot spacing on held-out runs needs at least 2 runs")
+    if widths is None:
+        base = fit_rig(runs, spec)
+        widths = {k: v["play_width"] for k, v in base.per_run.items()}
+    lo, hi = map_range(runs, spec.t_skip)
+    scores = {}
+    for s in candidates:
+        basis = make_basis(runs, s, spec.t_skip)
+        _, eqs = _normal_equations(runs, spec, basis, 0.5 * (lo + hi), widths)
+        G = sum(e[0] for e in eqs)
+        h = sum(e[1] for e in eqs)
+        ss, n = 0.0, 0
+        for g, hh, Xp, zp, *_ in eqs:
+            beta = _solve(G - g, h - hh)
+            r = zp - Xp @ beta
+            ss += float(r @ r)
+            n += r.size
+        scores[float(s)] = float(np.sqrt(ss / n))
+    best = min(scores, key=scores.get)
+    return best, scores
+
+
+# ----------------------------------------------------------------------------- splits
+
+
+def _same(a, b) -> bool:
+    try:
+        return bool(np.isclose(float(a), float(b), rtol=1e-9, atol=0.0))
+    except (TypeError, ValueError):
+        return str(a) == str(b)
+
+
+def make_folds(runs: Sequence[Run], splits: Sequence[Mapping]) -> list[dict]:
+    """Train/test folds of a rig.
+
+    Each split is ``{"name", "by": condition, "train": [values], "test": [values]}`` (one fold),
+    ``{"name", "by": condition}`` (leave one value of the condition out: one fold per value) or
+    ``{"name", "leave_one_run_out": true}``. Returns ``[{"split", "fold", "train", "test"}]``
+    with run ids.
+    """
+    ids = [r.run_id for r in runs]
+    folds = []
+    for sp in splits:
+        name = sp.get("name") or sp.get("by") or "leave_one_run_out"
+        if sp.get("leave_one_run_out"):
+            folds += [{"split": name, "fold": i, "train": [j for j in ids if j != i], "test": [i]}
+                      for i in ids]
+            continue
+        by = sp.get("by")
+        missing = [r.run_id for r in runs if by not in r.conditions]
+        if by is None or missing:
+            raise ValueError(f"split {name!r}: condition {by!r} missing in run(s) {missing or ids}")
+        values = [r.conditions[by] for r in runs]
+        if "train" in sp or "test" in sp:
+            train = [r.run_id for r in runs if any(_same(r.conditions[by], v) for v in sp.get("train", []))]
+            test = [r.run_id for r in runs if any(_same(r.conditions[by], v) for v in sp.get("test", []))]
+            if not train or not test:
+                raise ValueError(f"split {name!r}: no run with {by} in train {sp.get('train')} or test "
+                                 f"{sp.get('test')}; values present {sorted(set(map(str, values)))}")
+            folds.append({"split": name, "fold": f"{by} {sp.get('test')}", "train": train, "test": test})
+        else:
+            levels = []
+            for v in values:
+                if not any(_same(v, u) for u in levels):
+                    levels.append(v)
+            for v in levels:
+                test = [r.run_id for r in runs if _same(r.conditions[by], v)]
+                folds.append({"split": name, "fold": f"{by}={v}",
+                              "train": [i for i in ids if i not in test], "test": test})
+    return folds
+
+
+def evaluate(runs: Sequence[Run], spec: RigSpec, folds: Sequence[Mapping],
+             spacings: Sequence[float] | None = None,
+             keep_residuals: bool = False) -> tuple[list[dict], list[dict]]:
+    """Fit on each fold's training runs, score every run of the fold.
+
+    ``spacings``: candidate knot spacings chosen per fold on the training runs alone
+    (:func:`choose_spacing`); ``None`` keeps ``spec.spacing``.
+
+    Returns
+    -------
+    rows : list of dict
+        One per fold and run: ``split``, ``fold``, ``run_id``, ``role`` (train/test), the
+        conditions, the before (offset only) and after std (steady, all), the per-run effects.
+    folds_out : list of dict
+        One per fold: the spacing, the shared coefficients and their intervals, the fit, and
+        (``keep_residuals``) ``residuals``: ``{run id: reading - prediction}`` of its test runs.
+    """
+    by_id = {r.run_id: r for r in runs}
+    rows, out = [], []
+    before = {}
+    for r in runs:
+        m = _fit_mask(r, spec)
+        c = float(np.mean((r.measured - r.truth)[m]))
+        before[r.run_id] = score_run(r, r.truth + c, spec)
+    for fold in folds:
+        train = [by_id[i] for i in fold["train"]]
+        fspec = spec
+        scores = None
+        if spacings and spec.spacing:
+            best, scores = choose_spacing(train, spec, spacings)
+            fspec = spec.with_(spacing=best)
+        fit = fit_rig(train, fspec)
+        kept = {}
+        for role, ids in (("train", fold["train"]), ("test", fold["test"])):
+            for i in ids:
+                run = by_id[i]
+                pred, per = predict_run(fit, run)
+                if keep_residuals and role == "test":
+                    kept[i] = run.measured - pred
+                sc = score_run(run, pred, fspec)
+                rows.append({"split": fold["split"], "fold": fold["fold"], "run_id": i, "role": role,
+                             **run.conditions,
+                             "before_steady_std": before[i]["steady_std"],
+                             "before_all_std": before[i]["all_std"],
+                             "steady_std": sc["steady_std"], "all_std": sc["all_std"],
+                             "n_steady": sc["n_steady"], "n_all": sc["n_all"],
+                             "steady_ss": sc["steady_ss"], "all_ss": sc["all_ss"],
+                             "floor_std": floor_std(run.step, run.truth_step), **per})
+        out.append({**fold, "spacing": fspec.spacing, "spacing_scores": scores, "fit": fit,
+                    **({"residuals": kept} if keep_residuals else {})})
+    return rows, out
+
+
+def pooled(rows: Sequence[Mapping], role: str = "test") -> dict:
+    """Pooled steady / all residual std over rows of one role (sums of squares over samples)."""
+    sel = [r for r in rows if r["role"] == role]
+    ns = sum(r["n_steady"] for r in sel)
+    na = sum(r["n_all"] for r in sel)
+    return {"steady_std": float(np.sqrt(sum(r["steady_ss"] for r in sel) / ns)) if ns else float("nan"),
+            "all_std": float(np.sqrt(sum(r["all_ss"] for r in sel) / na)) if na else float("nan")}
+
+
+def fold_spread(folds_out: Sequence[Mapping]) -> dict:
+    """Per scalar shared parameter: mean over folds and the largest relative deviation
+    ``max |p_f - mean| / |mean|``."""
+    names = sorted({n for f in folds_out for n in f["fit"].shared()})
+    out = {}
+    for n in names:
+        vals = np.array([f["fit"].shared()[n] for f in folds_out if n in f["fit"].shared()])
+        mean = float(vals.mean())
+        out[n] = {"mean": mean, "min": float(vals.min()), "max": float(vals.max()),
+                  "rel_dev": float(np.max(np.abs(vals - mean)) / abs(mean)) if mean else float("inf")}
+    return out
+
+
+def run_from_canonical(df, meta: Mapping, measured: str, truth: str, torques: Sequence[str] = (),
+                       conditions: Mapping | None = None, run_id: str | None = None) -> Run:
+    """A :class:`Run` from a canonical log (:func:`enclab.io.read_canonical`): channel names of
+    the measured and truth angles and of the torques (N m) the compliance uses."""
+    from enclab.residuals.pipeline import channel_values
+
+    y, step = channel_values(df, meta, measured)
+    theta, truth_step = channel_values(df, meta, truth)
+    if step is None:
+        raise ValueError(f"log {meta.get('log_id')!r}: measured channel {measured!r} has no quantization step")
+    return Run(run_id=run_id or str(meta.get("log_id")), t=df["t"].to_numpy(np.float64), truth=theta,
+               measured=y, step=step, truth_step=truth_step,
+               torques={k: channel_values(df, meta, k)[0] for k in torques},
+               conditions=dict(conditions or {}))
+
+
+def simulate_rig(rng: np.random.Generator, conditions: Sequence[Mapping], *, duration: float = 4.0,
+                 fs: float = 1000.0, amplitude: float = 0.5, step: float = 2 * np.pi / 8192,
+                 truth_step: float = 2 * np.pi / 146860, scale: float = 0.0, map_fn=None,
+                 compliance: Mapping | None = None, play_width=0.02, latency=0.0,
+                 torque_gain: float = 0.1) -> list[Run]:
+    """Runs of a simulated rig with known shared and per-run effects.
+
+    Each condition ``{"frequency_hz": f, "load": L, ...}`` gives one run: the truth is a sine of
+    ``amplitude`` rad about ``amplitude`` (so the measured side spans about ``[0, 2 amplitude]``)
+    at frequency ``f``; the back torque follows the velocity, a sine at ``1.7 f`` and ``L``
+    (``torque_gain`` N m per unit), the front torque a scaled copy with its own noise. The
+    measured side is ``y = P_w(theta(t - latency)) + sum kappa f(T)`` and its reading
+    ``q(y + scale (y - amplitude) + map_fn(y))``; the truth is read on ``truth_step``.
+
+    ``play_width`` and ``latency`` are numbers or sequences (one per run). ``compliance`` is
+    ``{"torque_back:linear": k1, "torque_back:signed_square": k2, "torque_front:linear": k3}``.
+    """
+    runs = []
+    n = int(round(duration * fs))
+    t = np.arange(n) / fs
+    for i, cond in enumerate(conditions):
+        f = float(cond.get("frequency_hz", 0.5))
+        load = float(cond.get("load", 0.0))
+        phase = rng.uniform(0, 2 * np.pi)
+        w = float(np.atleast_1d(play_width)[i % np.size(play_width)])
+        tau = float(np.atleast_1d(latency)[i % np.size(latency)])
+
+        def theta(tt, f=f, phase=phase):
+            return amplitude + amplitude * np.sin(2 * np.pi * f * tt + phase)
+        om = 2 * np.pi * f
+        vel = amplitude * om * np.cos(om * t + phase)
+        # A friction-like part (velocity) and a part at an incommensurate frequency: a torque
+        # that is a function of the angle alone would be confounded with the calibration map.
+        tb = torque_gain * (load - 0.3 * vel / (amplitude * om)
+                            + 0.3 * np.sin(2 * np.pi * 1.7 * f * t + rng.uniform(0, 2 * np.pi))) \
+            + 0.002 * rng.standard_normal(n)
+        tf = -0.4 * tb + torque_gain * 0.5 * load + 0.002 * rng.standard_normal(n)
+        torques = {"torque_back": tb, "torque_front": tf}
+        y = play_operator(theta(t - tau), w)
+        for name, k in (compliance or {}).items():
+            channel, term = name.split(":")
+            y = y + k * compliance_columns({channel: [term]}, torques)[:, 0]
+        reading = y + scale * (y - amplitude) + (map_fn(y) if map_fn is not None else 0.0)
+        measured = step * np.round(reading / step)
+        truth = truth_step * np.round(theta(t) / truth_step) if truth_step else theta(t)
+        runs.append(Run(run_id=f"run{i:02d}", t=t, truth=truth, measured=measured, step=step,
+                        truth_step=truth_step, torques=torques, conditions=dict(cond)))
+    return runs

@@ -1,0 +1,380 @@
+"""The rig report: held-out tables per split and condition, the map and compliance curves with
+their bands, and what remains at reversals.
+
+:func:`analyse_rig` runs :mod:`enclab.residuals.rig` on the runs of one rig and one measured
+channel; :func:`map_figure`, :func:`compliance_figure`, :func:`heldout_figure` and
+:func:`remains_figure` return Figures (the caller saves them); :func:`markdown` the report text.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+import pandas as pd
+from matplotlib.figure import Figure
+
+from enclab.residuals import rig as rg
+from enclab.residuals.calibration import compliance_curve, compliance_names
+
+__all__ = ["analyse_rig", "remains", "map_figure", "compliance_figure", "heldout_figure",
+           "remains_figure", "markdown", "condition_table", "split_table"]
+
+MRAD = 1e3
+#: Largest relative change of a shared parameter between folds for it to count as pinned down.
+SPREAD = 0.15
+
+
+def remains(runs: Sequence[rg.Run], residuals: Mapping, spec: rg.RigSpec, bin_width: float = 0.002) -> dict:
+    """Where the held-out residual is left, and how much of it repeats from reversal to reversal.
+
+    ``residuals``: ``{run id: reading - prediction}`` of held-out runs. Samples after ``t_skip``
+    with less than ``spec.travel`` of truth travel since the last reversal form the *reversal
+    windows*. Returns their share of the residual's sum of squares, the residual std inside and
+    outside them, and the *repeatable share*: the fraction of the windows' sum of squares that the
+    mean over all reversals of the held-out runs (in bins of ``bin_width`` of travel, per direction)
+    explains. A motion inside the play that repeats after every reversal (a mean transient) has a
+    repeatable share near 1; stick-slip, steps at times that differ from one reversal to the next,
+    near 0.
+    """
+    by_id = {r.run_id: r for r in runs}
+    e_win, key_win, e_out = [], [], []
+    for run_id, e in residuals.items():
+        run = by_id[run_id]
+        keep = run.t >= run.t[0] + spec.t_skip
+        travel, direction = rg.reversal_travel(run.truth)
+        win = keep & (travel < spec.travel)
+        e = np.asarray(e) - np.mean(np.asarray(e)[keep])
+        e_win.append(e[win])
+        key_win.append(np.floor(travel[win] / bin_width).astype(int) * 2 + (direction[win] > 0))
+        e_out.append(e[keep & ~win])
+    if not e_win:
+        return {}
+    ew, kw, eo = np.concatenate(e_win), np.concatenate(key_win), np.concatenate(e_out)
+    ss_w, ss_o = float(ew @ ew), float(eo @ eo)
+    _, inv, counts = np.unique(kw, return_inverse=True, return_counts=True)
+    means = np.bincount(inv, weights=ew) / counts
+    within = ew - means[inv]
+    return {"window_share": ss_w / (ss_w + ss_o), "window_std": float(np.sqrt(ss_w / ew.size)),
+            "outside_std": float(np.sqrt(ss_o / eo.size)), "window_fraction": ew.size / (ew.size + eo.size),
+            "repeatable_share": 1.0 - float(within @ within) / ss_w if ss_w else float("nan"),
+            "n_window": int(ew.size), "n_outside": int(eo.size)}
+
+
+def analyse_rig(runs: Sequence[rg.Run], spec: rg.RigSpec, splits: Sequence[Mapping],
+                spacings: Sequence[float] | None) -> dict:
+    """Held-out evaluation of one rig and one measured channel, and the fit on every run.
+
+    Returns
+    -------
+    dict
+        ``rows`` (one per fold and run, :func:`enclab.residuals.rig.evaluate`), ``folds``
+        (the fold results), ``spread`` (:func:`enclab.residuals.rig.fold_spread` over the folds
+        of condition splits), ``remains`` per split, ``final`` (the fit on all runs, its knot
+        spacing chosen by leave-one-run-out) and ``spacing_scores``.
+    """
+    folds = rg.make_folds(runs, splits)
+    rows, out = rg.evaluate(runs, spec, folds, spacings, keep_residuals=True)
+    rem = {}
+    for split in dict.fromkeys(f["split"] for f in out):
+        res = {k: v for f in out if f["split"] == split for k, v in f["residuals"].items()}
+        rem[split] = remains(runs, res, spec)
+    fspec, scores = spec, None
+    if spacings and spec.spacing:
+        best, scores = rg.choose_spacing(runs, spec, spacings)
+        fspec = spec.with_(spacing=best)
+    final = rg.fit_rig(runs, fspec)
+    return {"rows": rows, "folds": out, "spread": rg.fold_spread(out) if out else {}, "remains": rem,
+            "final": final, "spacing_scores": scores, "spec": spec}
+
+
+def split_table(rows: Sequence[Mapping]) -> pd.DataFrame:
+    """Held-out residual std per split (test runs pooled): before (offset only) and after, steady
+    strokes and all samples (rad), with the quantization floor."""
+    out = []
+    df = pd.DataFrame(rows)
+    for split, sel in df[df["role"] == "test"].groupby("split", sort=False):
+        after = rg.pooled(sel.to_dict("records"))
+        b_st = np.sqrt(np.sum(sel["before_steady_std"] ** 2 * sel["n_steady"]) / sel["n_steady"].sum())
+        b_all = np.sqrt(np.sum(sel["before_all_std"] ** 2 * sel["n_all"]) / sel["n_all"].sum())
+        out.append({"split": split, "test_runs": len(sel), "before_steady": b_st, "before_all": b_all,
+                    "after_steady": after["steady_std"], "after_all": after["all_std"],
+                    "floor": float(sel["floor_std"].iloc[0])})
+    return pd.DataFrame(out)
+
+
+def condition_table(rows: Sequence[Mapping], conditions: Sequence[str]) -> pd.DataFrame:
+    """Held-out residual std per split and value of each condition (test runs pooled)."""
+    df = pd.DataFrame(rows)
+    df = df[df["role"] == "test"]
+    out = []
+    for split, sel in df.groupby("split", sort=False):
+        for cond in conditions:
+            if cond not in sel:
+                continue
+            for value, grp in sel.groupby(cond):
+                p = rg.pooled(grp.to_dict("records"))
+                out.append({"split": split, "condition": cond, "value": value, "runs": len(grp),
+                            "before_steady": float(np.sqrt(np.mean(grp["before_steady_std"] ** 2))),
+                            "before_all": float(np.sqrt(np.mean(grp["before_all_std"] ** 2))),
+                            "after_steady": p["steady_std"], "after_all": p["all_std"]})
+    return pd.DataFrame(out)
+
+
+def _grid(fit: rg.RigFit, n: int = 400) -> np.ndarray:
+    return np.linspace(fit.basis.lo, fit.basis.hi, n)
+
+
+def map_figure(result: Mapping, title: str = "") -> Figure:
+    """The calibration map of the fit on all runs with its 90 % band, the scale's line over
+    the reference range, and each fold's map (thin)."""
+    fit = result["final"]
+    fig = Figure(figsize=(7.5, 4.2), layout="constrained")
+    ax = fig.add_subplot()
+    if fit.basis is None:
+        ax.text(0.5, 0.5, "no calibration map in this model", ha="center", transform=ax.transAxes)
+        return fig
+    a = _grid(fit)
+    curve, lo, hi = fit.map_curve(a)
+    ax.fill_between(a, lo * MRAD, hi * MRAD, color="C0", alpha=0.3, lw=0, label="90 % band (jackknife over runs)")
+    ax.plot(a, curve * MRAD, color="C0", lw=1.5, label=f"map, knots every {fit.basis.spacing:g} rad")
+    for f in result["folds"]:
+        if f["fit"].basis is not None:
+            ax.plot(a, f["fit"].map_curve(a)[0] * MRAD, lw=0.6, alpha=0.7, label=f"fold {f['split']}: {f['fold']}")
+    ax.axvspan(*fit.basis.ref, color="0.92", zorder=0, label="reference range of the scale")
+    ax.axhline(0, color="k", lw=0.5)
+    ax.set_xlabel("measured-side angle (rad)")
+    ax.set_ylabel("map (mrad)")
+    scale = fit.shared().get("scale")
+    ax.set_title((title + "\n" if title else "") + "calibration map: reading - angle, after offset and scale"
+                 + (f" (scale {scale:+.4g})" if scale is not None else ""), fontsize=9)
+    ax.legend(fontsize=7, loc="best")
+    return fig
+
+
+def compliance_figure(result: Mapping, torques: Mapping, title: str = "") -> Figure:
+    """Twist of the measured side against each torque channel (the channel's terms alone), fit
+    on all runs with a 90 % jackknife band, over the logged torque range; each fold thin."""
+    fit = result["final"]
+    spec = fit.spec.compliance
+    channels = list(spec)
+    fig = Figure(figsize=(4.0 * max(len(channels), 1), 3.6), layout="constrained")
+    if not channels:
+        fig.add_subplot().text(0.5, 0.5, "no compliance in this model", ha="center")
+        return fig
+    names = compliance_names(spec)
+    idx = {n: fit.names.index(n) for n in names}
+    for k, ch in enumerate(channels):
+        ax = fig.add_subplot(1, len(channels), k + 1)
+        lo, hi = torques[ch]
+        T = np.linspace(lo, hi, 200)
+        coef = [fit.coef[idx[n]] for n in names]
+        curve = compliance_curve(coef, spec, ch, T)
+        if fit.cov is not None:
+            cols = [n for n in names if n.startswith(ch + ":")]
+            J = np.column_stack([compliance_curve([1.0 if m == n else 0.0 for m in names], spec, ch, T) for n in cols])
+            ii = [idx[n] for n in cols]
+            sd = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", J, fit.cov[np.ix_(ii, ii)], J), 0))
+            ax.fill_between(T, (curve - 1.6449 * sd) * MRAD, (curve + 1.6449 * sd) * MRAD, color="C1",
+                            alpha=0.3, lw=0, label="90 % band")
+        ax.plot(T, curve * MRAD, color="C1", lw=1.5, label="all runs")
+        for f in result["folds"]:
+            c = [f["fit"].coef[f["fit"].names.index(n)] for n in names]
+            ax.plot(T, compliance_curve(c, spec, ch, T) * MRAD, lw=0.6, alpha=0.7, label=f"fold {f['fold']}")
+        ax.axhline(0, color="k", lw=0.5)
+        ax.set_xlabel(f"{ch} (N m)")
+        ax.set_ylabel("twist (mrad)")
+        terms = " + ".join(f"{fit.coef[idx[n]]:+.3g} {'T|T|' if n.endswith('signed_square') else 'T'}"
+                           for n in names if n.startswith(ch + ":"))
+        ax.set_title(f"{ch}: {terms} (rad, N m)", fontsize=8)
+        ax.legend(fontsize=6)
+    if title:
+        fig.suptitle(title, fontsize=9)
+    return fig
+
+
+def heldout_figure(result: Mapping, conditions: Sequence[str], title: str = "") -> Figure:
+    """Held-out residual std per split and condition value, before and after (steady and all)."""
+    table = condition_table(result["rows"], conditions)
+    splits = list(dict.fromkeys(table["split"])) if len(table) else []
+    fig = Figure(figsize=(4.2 * max(len(splits), 1), 3.8), layout="constrained")
+    floor = float(pd.DataFrame(result["rows"])["floor_std"].iloc[0]) if result["rows"] else None
+    for k, split in enumerate(splits):
+        ax = fig.add_subplot(1, len(splits), k + 1)
+        sel = table[table["split"] == split]
+        labels = [f"{c}={v:g}" if isinstance(v, (int, float)) else f"{c}={v}" for c, v in zip(sel["condition"], sel["value"])]
+        x = np.arange(len(sel))
+        for j, (col, lab) in enumerate((("before_all", "before, all"), ("after_all", "after, all"),
+                                         ("after_steady", "after, steady"))):
+            ax.bar(x + (j - 1) * 0.27, sel[col] * MRAD, width=0.27, label=lab)
+        if floor:
+            ax.axhline(floor * MRAD, color="k", lw=0.8, ls="--", label="quantization floor")
+        ax.set_yscale("log")
+        ax.set_xticks(x, labels, rotation=45, ha="right", fontsize=7)
+        ax.set_ylabel("held-out residual std (mrad)")
+        ax.set_title(f"split: {split}", fontsize=9)
+        ax.legend(fontsize=6)
+    if title:
+        fig.suptitle(title, fontsize=9)
+    return fig
+
+
+def remains_figure(result: Mapping, runs: Sequence[rg.Run], title: str = "") -> Figure:
+    """Held-out residual against the truth's travel since the last reversal (first split's test
+    runs): where what remains sits."""
+    fig = Figure(figsize=(7.5, 3.8), layout="constrained")
+    ax = fig.add_subplot()
+    spec = result["spec"]
+    by_id = {r.run_id: r for r in runs}
+    folds = result["folds"]
+    if not folds:
+        return fig
+    first = folds[0]["split"]
+    for run_id, e in ((k, v) for f in folds if f["split"] == first for k, v in f["residuals"].items()):
+        run = by_id[run_id]
+        travel, direction = rg.reversal_travel(run.truth)
+        keep = (run.t >= run.t[0] + spec.t_skip) & (travel < 3 * spec.travel)
+        ax.plot(travel[keep] * direction[keep], (e[keep] - np.mean(e)) * MRAD, ",", alpha=0.3)
+    ax.axvline(spec.travel, color="k", lw=0.6, ls="--")
+    ax.axvline(-spec.travel, color="k", lw=0.6, ls="--", label=f"steady beyond {spec.travel:g} rad")
+    ax.set_xlabel("truth travel since the last reversal x direction (rad)")
+    ax.set_ylabel("held-out residual (mrad)")
+    ax.set_title((title + "\n" if title else "") + f"what remains (split {first}, held-out runs)", fontsize=9)
+    ax.legend(fontsize=7)
+    return fig
+
+
+def markdown(name: str, channel: str, result: Mapping, conditions: Sequence[str],
+             truth_counts_per_rev: float | None = None) -> str:
+    """The rig report in words and tables."""
+    fit = result["final"]
+    lines = [f"# Rig {name}: {channel}", ""]
+    n = len(fit.train_ids)
+    per_run = "offset, play width" + (", latency" if fit.spec.latency is True else "")
+    lines += [f"{n} runs fitted together. Per run: {per_run}. Shared by the rig: "
+              + ", ".join(x for x in (["scale"] if fit.spec.scale else [])
+                          + (["latency"] if fit.spec.latency == "shared" else [])
+                          + ([f"calibration map (knots every {fit.spec.spacing:g} rad, chosen on "
+                              "held-out runs)"] if fit.spec.spacing else [])
+                          + ([f"compliance {compliance_names(fit.spec.compliance)}"] if fit.spec.compliance else [])
+                          + ([f"reversal transient (knots every {fit.spec.transient:g} rad)"] if fit.spec.transient else []))
+              + ".", ""]
+    lines += ["## Held out", "", "Residual std (mrad) of reading - prediction on runs the shared terms never "
+              f"saw (their own {per_run} refitted): *steady* = strokes with more than "
+              f"{fit.spec.travel:g} rad of truth travel since the last reversal, *all* = every sample after "
+              f"{fit.spec.t_skip:g} s. *before* = the offset alone.", ""]
+    st = split_table(result["rows"])
+    if len(st):
+        lines.append((st.set_index("split")[["test_runs", "before_steady", "before_all", "after_steady",
+                                             "after_all", "floor"]]
+                      .assign(**{c: lambda d, c=c: d[c] * MRAD for c in ("before_steady", "before_all",
+                                                                          "after_steady", "after_all", "floor")})
+                      .to_markdown(floatfmt=".3f")))
+        lines += ["", "Per condition (test runs):", ""]
+        ct = condition_table(result["rows"], conditions)
+        for c in ("before_steady", "before_all", "after_steady", "after_all"):
+            ct[c] = ct[c] * MRAD
+        lines.append(ct.to_markdown(index=False, floatfmt=".3f"))
+    lines += ["", "## Shared parameters", "", "Fit on all runs with 90 % intervals (delete-one-run jackknife), "
+              "and their spread across the folds (largest deviation from the fold mean / |mean|):", ""]
+    ci = fit.ci()
+    spread = result["spread"]
+    prm = []
+    for k, v in fit.shared().items():
+        lo_hi = ci.get(k, (float("nan"), float("nan")))
+        prm.append({"parameter": k, "value": v, "ci_lo": lo_hi[0], "ci_hi": lo_hi[1],
+                    "fold_mean": spread.get(k, {}).get("mean"),
+                    "fold_spread": spread.get(k, {}).get("rel_dev")})
+    if prm:
+        lines.append(pd.DataFrame(prm).to_markdown(index=False, floatfmt=".4g"))
+        loose = [p["parameter"] for p in prm if p["fold_spread"] is not None and p["fold_spread"] > SPREAD]
+        if loose:
+            lines += ["", f"Not pinned down: {', '.join(loose)} move by more than {SPREAD:.0%} between folds; "
+                      "read them as a fit of these runs, not as physical values (the folds' training runs do "
+                      "not cover the same range of the covariate, and the terms trade off against each other "
+                      "and the per-run play there)."]
+    if truth_counts_per_rev and "scale" in fit.shared():
+        s = fit.shared()["scale"]
+        lines += ["", f"Scale {s:+.4g}: the truth channel reads {truth_counts_per_rev * (1 - s):,.0f} counts per "
+                  f"measured-side revolution, not the declared {truth_counts_per_rev:,.0f}."]
+    per = pd.DataFrame([{"run": k, **v} for k, v in fit.per_run.items()])
+    if len(per):
+        lines += ["", "Per run (fit on all runs): "
+                  f"play width {per['play_width'].min():.4g}-{per['play_width'].max():.4g} rad"
+                  + (f", latency {per['latency'].min() * 1e3:.3g}-{per['latency'].max() * 1e3:.3g} ms"
+                     if fit.spec.latency is True else "") + "."]
+    lines += ["", "## What remains", ""]
+    for split, rem in result["remains"].items():
+        if not rem:
+            continue
+        lines.append(
+            f"- split {split}: the reversal windows (less than {fit.spec.travel:g} rad of truth travel since "
+            f"the last reversal, {rem['window_fraction']:.0%} of the samples) hold {rem['window_share']:.0%} "
+            f"of the held-out residual's sum of squares (std {rem['window_std'] * MRAD:.2f} mrad inside, "
+            f"{rem['outside_std'] * MRAD:.2f} mrad outside). Of it, {rem['repeatable_share']:.0%} repeats from "
+            "reversal to reversal (the mean over all held-out reversals at the same travel and direction); "
+            f"the other {1 - rem['repeatable_share']:.0%} does not."
+            + (" The repeatable part is a motion inside the play whose shape changes with the condition "
+               "held out: the training runs' reversal transient does not carry over to it."
+               if rem["repeatable_share"] >= 0.5 and fit.spec.transient else ""))
+    excess = [r for r in result["remains"].values() if r and r["window_std"] > 1.5 * r["outside_std"]]
+    if excess:
+        lines += ["", "The reversal windows hold more than the steady strokes. Inside the play the measured "
+                  "side is not driven by the truth side: it moves when friction and the load let it, in steps "
+                  "at times that differ from one reversal to the next (stick-slip: the part that does not "
+                  "repeat). A model of the reading as a "
+                  "function of the truth's motion (a play operator, a reversal transient) can at best follow "
+                  "the repeatable part; the rest needs a measurement of the measured side's own driving torque "
+                  "at the instant it slips, or a stochastic model.", ""]
+    else:
+        lines += ["", "The reversal windows hold no more than the steady strokes: nothing is left at the "
+                  "reversals.", ""]
+    return "\n".join(lines) + "\n"
+
+
+def _fit_block(fit: rg.RigFit) -> dict:
+    block = {"spacing": fit.spec.spacing, "shared": fit.shared(),
+             "ci90": {k: list(v) for k, v in fit.ci().items()}, "per_run": fit.per_run,
+             "train": list(fit.train_ids)}
+    if fit.basis is not None:
+        a = _grid(fit, 101)
+        curve, lo, hi = fit.map_curve(a)
+        block["map"] = {"angle": a.tolist(), "curve": curve.tolist(), "band_lo": lo.tolist(),
+                        "band_hi": hi.tolist(), "scale_reference_range": list(fit.basis.ref)}
+    return block
+
+
+def report_rig(name: str, channel: str, runs: Sequence[rg.Run], spec: rg.RigSpec,
+               splits: Sequence[Mapping], spacings: Sequence[float] | None,
+               truth_counts_per_rev: float | None = None) -> dict:
+    """Everything the rig rule writes for one measured channel: ``block`` (JSON), ``tables``
+    (``heldout`` per fold and run, ``splits``, ``conditions``), ``figures`` (``map``,
+    ``compliance``, ``heldout``, ``remains``) and ``markdown``."""
+    result = analyse_rig(runs, spec, splits, spacings)
+    conditions = list(dict.fromkeys(k for r in runs for k in r.conditions))
+    torques = {ch: (float(min(np.percentile(r.torques[ch], 0.5) for r in runs)),
+                    float(max(np.percentile(r.torques[ch], 99.5) for r in runs))) for ch in spec.compliance}
+    title = f"rig {name}: {channel}"
+    rows = [{k: v for k, v in r.items() if not k.endswith("_ss")} for r in result["rows"]]
+    block = {
+        "rig": name, "measured": channel, "runs": [r.run_id for r in runs],
+        "metric": "std of (reading - prediction) [rad]; steady strokes and all samples after t_skip",
+        "settings": {"travel": spec.travel, "t_skip": spec.t_skip, "max_play": spec.max_play,
+                     "latency": "run" if spec.latency is True else spec.latency,
+                     "compliance": dict(spec.compliance), "transient": spec.transient,
+                     "spacings": list(spacings or [])},
+        "splits": split_table(result["rows"]).to_dict("records"),
+        "heldout": rows,
+        "folds": [{"split": f["split"], "fold": str(f["fold"]), "test": f["test"],
+                   "spacing_scores": f["spacing_scores"], **_fit_block(f["fit"])} for f in result["folds"]],
+        "spread": result["spread"], "remains": result["remains"],
+        "final": {**_fit_block(result["final"]), "spacing_scores": result["spacing_scores"]},
+    }
+    return {
+        "block": block,
+        "tables": {"heldout": pd.DataFrame(rows), "splits": split_table(result["rows"]),
+                   "conditions": condition_table(result["rows"], conditions)},
+        "figures": {"map": map_figure(result, title), "compliance": compliance_figure(result, torques, title),
+                    "heldout": heldout_figure(result, conditions, title),
+                    "remains": remains_figure(result, runs, title)},
+        "markdown": markdown(name, channel, result, conditions, truth_counts_per_rev),
+    }
