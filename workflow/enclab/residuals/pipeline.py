@@ -154,7 +154,8 @@ def analyse_channel(df: pd.DataFrame, meta: Mapping, pair: Mapping, settings: Ma
         ``residuals.json``: channel names, steps, offset, the diagnostics before and after,
         the selection (``to_summary()`` plus ``explained`` and ``message``).
     figures : dict
-        ``diagnostics`` and ``before_after`` matplotlib Figures.
+        ``diagnostics``, ``before_after`` and ``covariates`` (the residual after the effects
+        against its top covariates) matplotlib Figures.
     table : DataFrame
         The before/after table: one row per stage with std, mean, rms, max |r| and the floor.
 
@@ -180,6 +181,13 @@ def analyse_channel(df: pd.DataFrame, meta: Mapping, pair: Mapping, settings: Ma
                 "(a float channel without a detected grid); declare native_step in the manifest "
                 "or analysis.residuals.step")
         step = float(cfg["step"])
+    if truth_step is None:
+        # a float truth channel: the grid it is on, if any (the exact-model floor needs it; a
+        # grid coarser than the measured step is no truth grid but a coincidence of the motion)
+        from enclab.residuals.select import estimate_grid_step
+
+        est = estimate_grid_step(truth)
+        truth_step = est if 0.0 < est <= step else None
     if truth_step is not None and truth_step > step:
         raise ValueError(f"log {log_id!r}: truth channel {pair['truth']!r} (step {truth_step:.6g} rad) "
                          f"is coarser than measured channel {pair['measured']!r} (step {step:.6g} rad)")
@@ -204,7 +212,18 @@ def analyse_channel(df: pd.DataFrame, meta: Mapping, pair: Mapping, settings: Ma
     v = dg.velocity(t, truth)
     after_diag = {"residual": dg.moments(r_after), "velocity_sign": dg.velocity_sign(v, r_after)}
     selection = dict(res.to_summary())
-    selection.update(explained=bool(res.explained), message=str(res.message))
+    # Outside the catalogue: what the rest follows, ranked by held-out share of its variance
+    others = {c["name"]: channel_values(df, meta, c["name"])[0] for c in meta["channels"]
+              if c["name"] not in (pair["measured"], pair["truth"])}
+    covariates = dg.covariates_of(t, truth, others)
+    ranking = dg.rank_covariates(r_after, covariates)
+    message = str(res.message)
+    outside = None
+    if not res.explained:
+        outside = dg.covariate_sentence(ranking)
+        message = f"{message}; {outside}"
+    selection.update(explained=bool(res.explained), message=message, covariates=ranking,
+                     outside_catalogue=outside)
     block = {
         "log_id": log_id, "measured": pair["measured"], "truth": pair["truth"],
         "step": step, "truth_step": truth_step, "offset": offset,
@@ -221,6 +240,7 @@ def analyse_channel(df: pd.DataFrame, meta: Mapping, pair: Mapping, settings: Ma
         "before_after": plots.before_after_figure(t, truth, measured, diag["prediction"], after_pred,
                                                   step, title=title,
                                                   effects_label=_effects_label(res.effects)),
+        "covariates": plots.covariates_figure(r_after, covariates, ranking, step, title=title),
     }
     table = before_after_table(log_id, pair, step, diag, r_after, res.before, res.after,
                                selection["effects"], explained=bool(res.explained))
