@@ -208,3 +208,43 @@ def test_unexplained_channel_says_what_the_rest_follows():
     assert sel_["outside_catalogue"].startswith("the rest follows time")
     assert sel_["outside_catalogue"] in sel_["message"]
     assert figures["covariates"].axes[0].get_xlabel() == "time"
+
+
+# ------------------------------------------------------------------ no meaningless numbers
+def test_a_scale_and_a_harmonic_over_a_short_stroke_are_merged_into_their_joint_shift():
+    rng = np.random.default_rng(0)
+    motion = random_motion(rng, "sine", 10.0, 0.6, 0.7)  # a 1.2 rad stroke
+    harm, g = {"a1": 3 * STEP, "b1": -2 * STEP, "a2": STEP}, 3e-3
+    log = simulate_log(rng, motion, duration=10.0, step=STEP, truth_step=TRUTH_STEP,
+                       effects={"angle_harmonics": harm, "scale_mismatch": {"g": g}})
+    ctx = sel._make_ctx(log["t"], log["truth"], log["counts"], STEP, TRUTH_STEP, {}, 0.0, None)
+    x, ll = sel._fit(sel._Model([]), ctx, sel._base_start(ctx))
+    cur = sel._Fitted(sel._Model([]), x, ll)
+    sc, ah = fx.ScaleMismatch(), fx.AngleHarmonics()
+    cur = sel._extend(sel._extend(cur, sc, ctx), ah, ctx)
+    _, cov = sel._intervals(cur, ctx, with_cov=True)
+    fitted = [sel.FittedEffect(e.name, cur.model.params_of(cur.x, cur.model.effects.index(e)), {}, 0.0, 0.0)
+              for e in (sc, ah)]
+    sel._merge_confounded(fitted, [sc, ah], cur, cov, ctx)
+    assert fitted[0].merged_with == ["angle_harmonics"] and fitted[1].merged_with == ["scale_mismatch"]
+    # the joint shift is what the data determine: its peak to peak is the true one's
+    th = log["theta"]
+    te = th + g * (th - log["truth"].mean())
+    true = te + harm["a1"] * np.cos(te) + harm["b1"] * np.sin(te) + harm["a2"] * np.cos(2 * te) - th
+    assert fitted[0].derived["joint_peak_to_peak"] == pytest.approx(np.ptp(true), abs=0.02 * STEP)
+    for f in fitted:
+        f.separated_by = "a motion over a full turn or more"
+    msg = sel._message(fitted, True, {"std": 1.0, "floor_ci": (0, 1)})
+    assert "cannot be separated over this motion" in msg and "a motion over a full turn" in msg
+    assert "g 0.00" not in msg and "a1" not in msg  # the separate values are not printed
+
+
+def test_a_scale_over_a_short_stroke_carries_its_caveat():
+    rng = np.random.default_rng(0)
+    log = simulate_log(rng, random_motion(rng, "sine", 6.0, 0.4), duration=6.0, step=STEP, truth_step=TRUTH_STEP,
+                       effects={"scale_mismatch": {"g": 2e-3}})
+    res = select_effects(log["t"], log["truth"], log["measured"], STEP, truth_step=TRUTH_STEP)
+    assert [e.name for e in res.effects] == ["scale_mismatch"]
+    assert "mean slope of the angle error" in res.effects[0].caveat
+    assert res.effects[0].to_dict()["caveat"] == res.effects[0].caveat
+    assert "a motion over a full turn separates them" in res.message

@@ -193,6 +193,13 @@ class Effect:
         """Extra derived quantities for reports (e.g. amplitude and phase)."""
         return {}
 
+    #: The motion that tells this effect apart from others it can trade off against (words).
+    separated_by = "a longer, more varied motion"
+
+    def caveat(self, ctx) -> str | None:
+        """What this log's motion cannot tell about the effect's parameters (words), or None."""
+        return None
+
     def __repr__(self) -> str:
         return f"{type(self).__name__}()"
 
@@ -235,6 +242,8 @@ class Hysteresis(Effect):
     param_names = ("h",)
     order = 10
 
+    separated_by = "slow reversals (the play's ramp against the dead band's step)"
+
     def bounds(self, ctx):
         lim = _span(ctx)
         return [(-lim, lim)]
@@ -267,6 +276,8 @@ class Backlash(Effect):
     # the play operator is non-linear in w: the linearised guess can land in a worse basin
     multistart = True
 
+    separated_by = "slow reversals over more than the play's width"
+
     def bounds(self, ctx):
         lim = _span(ctx)
         return [(-lim, lim)]
@@ -294,6 +305,15 @@ class AngleHarmonics(Effect):
     name = "angle_harmonics"
     param_names = ("a1", "b1", "a2", "b2")
     order = 20
+
+    separated_by = "a motion over a full turn or more (a harmonic returns, a scale error grows)"
+
+    def caveat(self, ctx):
+        stroke = float(np.ptp(ctx.truth))
+        if stroke >= 2.0 * np.pi:
+            return None
+        return (f"over a stroke of {stroke:.2g} rad the harmonic coefficients describe a smooth error of "
+                "the angle there, not the disc's run-out (a motion over a full turn pins them)")
 
     def applicable(self, ctx) -> bool:
         # a harmonic of the angle is only told apart from a constant on a travel of >= ~1 rad
@@ -396,6 +416,8 @@ class Latency(Effect):
     param_names = ("tau",)
     order = 5
 
+    separated_by = "a range of speeds with dwells and slow reversals"
+
     def applicable(self, ctx) -> bool:
         return float(np.max(np.abs(ctx.velocity))) > 0
 
@@ -430,6 +452,8 @@ class TimestampJitter(Effect):
     order = 26
     boundary = ("sigma_t",)
 
+    separated_by = "a range of speeds"
+
     def applicable(self, ctx) -> bool:
         return float(np.max(np.abs(ctx.velocity))) > 0
 
@@ -456,6 +480,15 @@ class ScaleMismatch(Effect):
     param_names = ("g",)
     order = 21
 
+    separated_by = "a motion over a full turn or more (a harmonic returns, a scale error grows)"
+
+    def caveat(self, ctx):
+        stroke = float(np.ptp(ctx.truth))
+        if stroke >= 2.0 * np.pi:
+            return None
+        return (f"over a stroke of {stroke:.2g} rad the scale is the mean slope of the angle error there: "
+                "a once-per-turn error adds its local slope (a motion over a full turn separates them)")
+
     def applicable(self, ctx) -> bool:
         return float(np.ptp(ctx.truth)) > 4.0 * ctx.step
 
@@ -477,6 +510,8 @@ class Compliance(Effect):
     name = "compliance"
     param_names = ("kappa",)
     order = 12
+
+    separated_by = "the same angles and speeds at different loads"
 
     def applicable(self, ctx) -> bool:
         tq = ctx.aux.get("torque") if ctx.aux else None
@@ -507,6 +542,8 @@ class SlowDrift(Effect):
     name = "slow_drift"
     param_names = ("c1", "c2", "c3")
     order = 25
+
+    separated_by = "passes over the same angles spread over the whole log"
 
     def applicable(self, ctx) -> bool:
         self.duration = float(ctx.t[-1] - ctx.t[0])

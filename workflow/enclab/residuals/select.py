@@ -120,6 +120,9 @@ class FittedEffect:
     alternatives: list = field(default_factory=list)
     distinguish_bic: float = 10.0
     delta_bic_final: float = float("nan")
+    caveat: str | None = None
+    merged_with: list = field(default_factory=list)
+    separated_by: str = ""
 
     @property
     def indistinguishable(self) -> list:
@@ -145,6 +148,10 @@ class FittedEffect:
             "alternatives": [alt(a) for a in self.alternatives],
             "distinguish_bic": float(self.distinguish_bic),
             "indistinguishable_from": [alt(a) for a in self.indistinguishable],
+            # what the motion cannot tell about the parameters; the effects it cannot be
+            # separated from (then params are not physical values: see "merged")
+            "caveat": self.caveat,
+            "merged_with": list(self.merged_with),
         }
 
 
@@ -532,8 +539,9 @@ def _heldout_gain(cur: _Fitted, new: _Fitted, ctx, n_folds):
     return gain
 
 
-def _intervals(fitted: _Fitted, ctx):
-    """Sandwich standard errors of all free parameters (see module notes)."""
+def _intervals(fitted: _Fitted, ctx, with_cov: bool = False):
+    """Sandwich standard errors of all free parameters (see module notes); with ``with_cov``
+    also the model-based covariance ``I^-1`` (SI units)."""
     model, x = fitted.model, fitted.x
     scales = model.scales(ctx)
     _, g = _scores(model, ctx, x, scales, ctx.fit_idx)
@@ -545,7 +553,58 @@ def _intervals(fitted: _Fitted, ctx):
     sand = inv @ meat @ inv
     # diag of a PSD matrix, up to rounding: clip the -1e-30s of an ill-conditioned pinv
     var = np.maximum(np.maximum(np.diag(inv), np.diag(sand)), 0.0)
+    if with_cov:
+        return np.sqrt(var) * scales, inv * np.outer(scales, scales)
     return np.sqrt(var) * scales
+
+
+#: Parameter correlation above which two chosen effects are not separable on the log's motion.
+_MERGE_CORR = 0.95
+
+
+def _merge_confounded(fitted_effects, effects, cur: _Fitted, cov, ctx):
+    """Mark chosen effects whose parameters the log's motion cannot separate (a correlation of
+    their estimates above ``_MERGE_CORR``, or an interval that spans its whole range): each
+    gets ``merged_with`` (the others of its group) and ``derived["joint_peak_to_peak"]``, the
+    peak-to-peak over the log of the group's joint shift of the angle, which the data do
+    determine; the separate values are then not physical values and are not reported as such.
+    """
+    n = len(effects)
+    sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    linked = {i: set() for i in range(n)}
+    for a in range(n):
+        for b in range(a + 1, n):
+            if effects[a].kind == "discrete" or effects[b].kind == "discrete":
+                continue
+            sa = cur.model.slices[cur.model.effects.index(effects[a])]
+            sb = cur.model.slices[cur.model.effects.index(effects[b])]
+            block = cov[sa, sb] / np.maximum(np.outer(sd[sa], sd[sb]), 1e-300)
+            both_loose = fitted_effects[a].derived.get("confounded") and fitted_effects[b].derived.get("confounded")
+            if (np.isfinite(block).all() and np.max(np.abs(block)) > _MERGE_CORR) or both_loose:
+                linked[a].add(b)
+                linked[b].add(a)
+    seen = set()
+    for i in range(n):
+        if i in seen or not linked[i]:
+            continue
+        group, todo = set(), [i]
+        while todo:
+            j = todo.pop()
+            if j not in group:
+                group.add(j)
+                todo += list(linked[j])
+        seen |= group
+        # the group's joint shift: the model with and without the group's parameters at null
+        x0 = cur.x.copy()
+        for j in group:
+            sl = cur.model.slices[cur.model.effects.index(effects[j])]
+            x0[sl] = effects[j].null()
+        mu1, _ = cur.model.forward(ctx, cur.x)
+        mu0, _ = cur.model.forward(ctx, x0)
+        ptp = float(np.ptp((mu1 - mu0) * ctx.step))
+        for j in group:
+            fitted_effects[j].merged_with = sorted(effects[k].name for k in group if k != j)
+            fitted_effects[j].derived["joint_peak_to_peak"] = ptp
 
 
 def _floor_probs(mu, half, sigma, js):
@@ -1002,7 +1061,7 @@ def select_effects(
 
     after = residual_stats(cur, full)
     alternatives = _alternatives(cur, chosen, chosen_trials, all_candidates, ctx, margin)
-    se = _intervals(cur, ctx)
+    se, cov = _intervals(cur, ctx, with_cov=True)
     lows = [b[0] for b in cur.model.bounds(ctx)]
     highs = [b[1] for b in cur.model.bounds(ctx)]
     fitted_effects = []
@@ -1030,6 +1089,10 @@ def select_effects(
             not np.isfinite(se[j]) or (cur.x[j] - _Z90 * se[j] <= lows[j]
                                        and cur.x[j] + _Z90 * se[j] >= highs[j])
             for j in range(sl.start, sl.stop)))
+    for fe, (e, *_rest) in zip(fitted_effects, chosen):
+        fe.caveat = e.caveat(ctx)
+        fe.separated_by = e.separated_by
+    _merge_confounded(fitted_effects, [c[0] for c in chosen], cur, cov, ctx)
     explained = after["std"] <= after["floor_limit"]
     message = _message(fitted_effects, explained, before, after)
     return SelectionResult(fitted_effects, before, after, bool(explained), message, steps,
@@ -1037,6 +1100,8 @@ def select_effects(
 
 
 def _fmt(e: FittedEffect) -> str:
+    if e.merged_with:  # its separate values mean nothing on this motion: not printed
+        return f"{e.name} (merged with {', '.join(e.merged_with)})"
     main = ", ".join(f"{k} {v:.3g}" for k, v in e.params.items())
     return f"{e.name} ({main})"
 
@@ -1061,9 +1126,23 @@ def _message(effects, explained, before, after=None):
         return (f"unexplained: the residual std {before['std']:.3g} rad is {_ratio(before):.3g}x the "
                 "exact-model floor and no candidate effect explains it")
     names = " + ".join(_fmt(e) for e in effects)
-    confounded = [e.name for e in effects if e.derived.get("confounded")]
+    confounded = [e.name for e in effects if e.derived.get("confounded") and not e.merged_with]
     caveat = (f"; {', '.join(confounded)} not pinned down (interval spans its whole range: "
               "confounded with the other effects over this motion)") if confounded else ""
+    done = set()
+    for e in effects:
+        if e.merged_with and e.name not in done:
+            group = [e.name] + e.merged_with
+            done |= set(group)
+            by_name = {f.name: f for f in effects}
+            motions = list(dict.fromkeys(by_name[n].separated_by for n in group if by_name[n].separated_by))
+            caveat += (f"; {' and '.join(group)} cannot be separated over this motion: only their joint "
+                       f"shift of the angle ({e.derived['joint_peak_to_peak']:.3g} rad peak to peak) is "
+                       f"determined, their separate values are not physical values ({' or '.join(motions)} "
+                       "would separate them)")
+    for e in effects:
+        if e.caveat and not e.merged_with:
+            caveat += f"; {e.name}: {e.caveat}"
     for e in effects:
         alts = e.indistinguishable
         if alts:
