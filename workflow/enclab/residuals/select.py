@@ -734,15 +734,18 @@ def estimate_grid_step(x, rtol: float = 1e-8) -> float:
     distinct = sizes[np.concatenate(([True], np.diff(sizes) > 2.0 * tol))][::-1]
     q = float(distinct[0])
     for b in distinct[1:]:
-        a, b = q, float(b)
-        if a < b:
-            a, b = b, a
-        while b > 2.0 * tol:
-            a, b = b, a - b * math.floor(a / b + 2.0 * tol / b)
-            b = abs(b)
-        q = a
-        if q <= 10.0 * tol:
-            return 0.0
+        a, b = max(q, float(b)), min(q, float(b))
+        # nearest-integer Euclid; the rounding error of a remainder grows with the quotient
+        # (a - n b carries n times b's error), so "zero" is judged against that
+        while True:
+            n = round(a / b)
+            rem = abs(a - n * b)
+            if rem <= 2.0 * tol * (1.0 + n):
+                break
+            a, b = b, rem
+            if b <= 10.0 * tol:
+                return 0.0
+        q = b
     n = np.round(d / q)
     if q <= 10.0 * tol or float(np.max(n)) > 2.0**20:
         return 0.0
