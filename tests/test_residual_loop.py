@@ -208,6 +208,18 @@ def test_unexplained_channel_says_what_the_rest_follows():
     assert sel_["outside_catalogue"].startswith("the rest follows time")
     assert sel_["outside_catalogue"] in sel_["message"]
     assert figures["covariates"].axes[0].get_xlabel() == "time"
+    (row,) = pipeline.batch_rows({"log_id": "drift", "residuals": pipeline.summary_block([block])})
+    assert row["outside_catalogue"] == sel_["outside_catalogue"] and row["verdict"].startswith("unexplained")
+
+
+def test_merged_effects_are_printed_without_their_separate_values():
+    from enclab.residuals import pipeline
+
+    e = {"name": "scale_mismatch", "params": {"g": 0.1}, "ci": {"g": [-1.0, 1.0]}, "delta_bic": 50.0,
+         "merged_with": ["angle_harmonics"], "derived": {"joint_peak_to_peak": 0.004}}
+    text = pipeline.format_effects([e])
+    assert text.startswith("scale_mismatch(merged with angle_harmonics: joint shift 0.004 rad")
+    assert "g=" not in text
 
 
 # ------------------------------------------------------------------ no meaningless numbers

@@ -100,6 +100,12 @@ def format_effects(effects) -> str:
     (``"NOT DISTINGUISHABLE from hysteresis (swap-in dBIC 1.7 < 10)"``)."""
     out = []
     for e in effects or []:
+        if e.get("merged_with"):
+            # separate values of effects the motion cannot separate are not physical values
+            ptp = (e.get("derived") or {}).get("joint_peak_to_peak", float("nan"))
+            out.append(f"{e['name']}(merged with {'+'.join(e['merged_with'])}: joint shift {ptp:.4g} rad "
+                       f"peak to peak, dBIC={e.get('delta_bic', float('nan')):.3g})")
+            continue
         ci = e.get("ci") or {}
         params = ", ".join(
             f"{k}={v:.4g}" + (f" [{ci[k][0]:.4g}, {ci[k][1]:.4g}]" if k in ci and ci[k] is not None else "")
@@ -314,6 +320,8 @@ def batch_rows(summary: Mapping) -> list[dict]:
             "verdict": verdict(sel.get("explained"), ratio),
             "effects": format_effects(effects),
             "indistinguishable": indistinguishable_label(effects),
+            # what the rest follows when unexplained (held-out covariate ranking, in words)
+            "outside_catalogue": sel.get("outside_catalogue") or "",
             "message": sel.get("message"),
         })
     return rows
