@@ -60,7 +60,7 @@ def test_latency_is_the_delayed_sample_itself():
     assert np.max(np.abs(first_order - exact)[inner]) > 1e-5
 
 
-@pytest.mark.parametrize("seed", [1, 3])
+@pytest.mark.parametrize("seed", [1])
 def test_a_large_latency_found_with_its_value_is_explained_without_jitter(seed):
     rng = np.random.default_rng(seed)
     motion = random_motion(rng, "sine", 10.0, 1.0)
