@@ -260,3 +260,28 @@ def test_a_scale_over_a_short_stroke_carries_its_caveat():
     assert "mean slope of the angle error" in res.effects[0].caveat
     assert res.effects[0].to_dict()["caveat"] == res.effects[0].caveat
     assert "a motion over a full turn separates them" in res.message
+
+
+def test_a_dwell_next_to_a_transition_is_no_missed_count():
+    # a clean log whose motion stops for 60 ms a hair (a fifth of the truth's step) past a
+    # transition of the measured grid: the truth reading, rounded, sits on the other side, so
+    # the exact model misses all 60 samples together, a "missed count and its return"
+    rng = np.random.default_rng(8)
+    c = 0.37
+    k = 40
+    dwell = (k - c) * STEP + 0.2 * TRUTH_STEP
+    t0, t1 = 3.0, 3.06
+
+    def motion(t):
+        t = np.asarray(t, dtype=float)
+        tt = np.where(t < t0, t, np.where(t < t1, t0, t - (t1 - t0)))
+        return dwell + 0.5 * np.sin(2 * np.pi * 0.4 * (tt - t0))
+
+    log = simulate_log(rng, motion, duration=6.0, step=STEP, truth_step=TRUTH_STEP, offset_frac=c)
+    ctx = sel._make_ctx(log["t"], log["truth"], log["counts"], STEP, TRUTH_STEP, {}, 0.0, None)
+    x, _ = sel._fit(sel._Model([]), ctx, sel._base_start(ctx))
+    mu, _ = sel._Model([]).forward(ctx, x)
+    resid = ctx.counts - (mu - 0.5)
+    assert fx.MissedCounts.detect(ctx.t, resid)[0]  # without the mask: a pulse of two changes
+    res = select_effects(log["t"], log["truth"], log["measured"], STEP, truth_step=TRUTH_STEP)
+    assert res.effects == [] and res.explained

@@ -596,7 +596,7 @@ class MissedCounts(Effect):
         return theta - aux["_step"] * shift
 
     @staticmethod
-    def detect(t, resid_counts, max_changes: int = 6, min_len: int = 20):
+    def detect(t, resid_counts, max_changes: int = 6, min_len: int = 20, informative=None):
         """Changepoints of an integer level in ``resid_counts`` (counts).
 
         The level is the running median over ``2 min_len + 1`` samples rounded to whole
@@ -607,10 +607,20 @@ class MissedCounts(Effect):
         change when there are more than ``max_changes`` (a residual that follows the motion is
         no missed count) or when a segment between changes does not sit on its level (at least
         80 % of its samples within half a count of its median).
+
+        ``informative`` (boolean, optional) marks the samples whose predicted count the
+        truth's own rounding cannot flip; only they are used. During a dwell next to a
+        transition of the measured grid every sample flips together (one truth reading, one
+        rounding error), which looks like a missed count and its return tens of ms later on a
+        clean log.
         """
         from scipy.ndimage import median_filter
 
         r = np.asarray(resid_counts, dtype=float)
+        t = np.asarray(t, dtype=float)
+        if informative is not None:
+            keep = np.asarray(informative, dtype=bool)
+            r, t = r[keep], t[keep]
         if r.size < 2 * min_len + 1:
             return [], []
         m = median_filter(r, size=2 * min_len + 1, mode="nearest")

@@ -503,7 +503,10 @@ def _discrete_candidate(name, cur: _Fitted, ctx):
         if any(isinstance(e, fx.MissedCounts) for e in cur.model.effects):
             return None
         resid = ctx.counts - (mu - 0.5)
-        times, jumps = fx.MissedCounts.detect(ctx.t, resid)
+        # samples farther than the truth's half step (in counts) from a transition of floor(mu)
+        half = 0.5 * ctx.truth_step / ctx.step
+        informative = np.abs(mu - np.round(mu)) > half
+        times, jumps = fx.MissedCounts.detect(ctx.t, resid, informative=informative)
         return fx.MissedCounts(times, jumps) if times else None
     if name == "wrap_around":
         if any(isinstance(e, fx.WrapAround) for e in cur.model.effects):
