@@ -609,18 +609,15 @@ class MissedCounts(Effect):
         80 % of its samples within half a count of its median).
 
         ``informative`` (boolean, optional) marks the samples whose predicted count the
-        truth's own rounding cannot flip; only they are used. During a dwell next to a
-        transition of the measured grid every sample flips together (one truth reading, one
-        rounding error), which looks like a missed count and its return tens of ms later on a
-        clean log.
+        truth's own rounding cannot flip; a level between two changes must hold ``min_len`` of
+        them. During a dwell next to a transition of the measured grid every sample flips
+        together (one truth reading, one rounding error), which looks like a missed count and
+        its return tens of ms later on a clean log: such a pulse is dropped.
         """
         from scipy.ndimage import median_filter
 
         r = np.asarray(resid_counts, dtype=float)
         t = np.asarray(t, dtype=float)
-        if informative is not None:
-            keep = np.asarray(informative, dtype=bool)
-            r, t = r[keep], t[keep]
         if r.size < 2 * min_len + 1:
             return [], []
         m = median_filter(r, size=2 * min_len + 1, mode="nearest")
@@ -659,6 +656,22 @@ class MissedCounts(Effect):
             score = left[:-1] + right[1:]
             refined.append((a + int(np.argmax(score)), jump))
         cps = refined
+        if informative is not None:
+            # a level held only by samples the truth's rounding can flip is no level: a pulse
+            # over such a stretch (a change and its return) is dropped; any other change
+            # bounding one means the residual is no staircase of missed counts
+            inf = np.asarray(informative, dtype=bool)
+            while True:
+                edges = [0] + [cp for cp, _ in cps] + [r.size]
+                weak = [i for i in range(1, len(edges) - 2) if inf[edges[i]:edges[i + 1]].sum() < min_len]
+                if not weak:
+                    break
+                i = weak[0]
+                if cps[i - 1][1] + cps[i][1] != 0:
+                    return [], []
+                del cps[i - 1:i + 1]
+            if not cps:
+                return [], []
         bounds = [0] + [cp for cp, _ in cps] + [r.size]
         for a, b in zip(bounds[:-1], bounds[1:]):
             seg = r[a:b]
