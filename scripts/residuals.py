@@ -11,6 +11,7 @@ def main(smk):
     io.write_table(table, smk.output.table)
     io.save_figure(figures["diagnostics"], smk.output.diagnostics)
     io.save_figure(figures["before_after"], smk.output.before_after)
+    io.save_figure(figures["covariates"], smk.output.covariates)
     io.write_json(block, smk.output.block)
 
 

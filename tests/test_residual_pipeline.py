@@ -85,8 +85,10 @@ def test_channel_block_table_and_figures(analysed):
     assert list(table["stage"]) == ["before", "after"]
     for key in ("metric", "before", "after", "effects", "explained", "message"):
         assert key in block["selection"]
-    assert set(figures) == {"diagnostics", "before_after"}
+    assert set(figures) == {"diagnostics", "before_after", "covariates"}
     assert len(figures["diagnostics"].axes) == 9 and len(figures["before_after"].axes) == 3
+    assert [ax.get_xlabel() for ax in figures["covariates"].axes] == [
+        d["name"] for d in block["selection"]["covariates"][:3]]
     json.dumps(block, default=float)  # JSON-able once numpy scalars are plain
 
 
@@ -160,7 +162,7 @@ def test_plain_csv_one_entry_manifest_end_to_end(tmp_path):
     assert "quantization" not in summary  # a continuous truth: the residual stage alone
     assert [e["name"] for e in block["effects"]][:1] == ["backlash"]
     out = tmp_path / "results/rig/residuals/output"
-    for name in ("residuals.json", "before_after.csv", "diagnostics.png", "before_after.png"):
+    for name in ("residuals.json", "before_after.csv", "diagnostics.png", "before_after.png", "covariates.png"):
         assert (out / name).stat().st_size > 0
     batch = pd.read_csv(tmp_path / "results/batch/residuals.csv")
     assert list(batch["log_id"]) == ["rig"] and batch["after_std"][0] < batch["before_std"][0]

@@ -62,7 +62,9 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
+from provenance import stamp  # noqa: E402
 
+from enclab.residuals import diagnostics as dg  # noqa: E402
 from enclab.residuals.select import select_effects  # noqa: E402
 from enclab.residuals import select as sel  # noqa: E402
 from enclab.residuals import effects as fx  # noqa: E402
@@ -83,7 +85,7 @@ def nominal_effect(name: str, rng: np.random.Generator, scale: float = 1.0) -> d
     0.2 count 2x (~20 um run-out on a 25 mm code disk); interpolation error 0.1 count on a
     16-count line; quadrature edge error 0.1 count rms per edge; latency 0.25 ms; timestamp
     jitter 0.1 ms; scale mismatch 1e-3 (a gear ratio off by 0.1 %); missed counts 1-3 counts
-    once; wrap-around at 2 pi.
+    once; wrap-around at 2 pi; slow drift 0.2 mrad/s.
     """
     sign = rng.choice([-1.0, 1.0])
     if name == "hysteresis":
@@ -111,6 +113,9 @@ def nominal_effect(name: str, rng: np.random.Generator, scale: float = 1.0) -> d
         return {"times": [float(rng.uniform(0.2, 0.8))], "jumps": [int(sign * rng.integers(1, 4))]}
     if name == "wrap_around":
         return {"period": 2 * np.pi}
+    if name == "slow_drift":
+        # a thermal drift of the reading: 0.2 mrad/s (0.13 count/s at 4096 cpr)
+        return {"rate": sign * 0.2e-3 * scale}
     raise ValueError(name)
 
 
@@ -121,11 +126,35 @@ PAIRS = [("backlash", "latency"), ("angle_harmonics", "scale_mismatch"), ("hyste
          ("quadrature_edges", "latency"), ("missed_counts", "backlash"), ("line_pitch_harmonics", "scale_mismatch")]
 
 
-def _make_log(rng, names, scales):
+ROTATING = ["scale_mismatch", "angle_harmonics", "latency", "missed_counts", "slow_drift"]
+
+
+def _rotation(rng, duration):
+    """A rotating axis: 0.3-1.5 rev/s either way with a 10 % speed ripple, 3-22 turns."""
+    f = float(rng.uniform(0.3, 1.5)) * rng.choice([-1.0, 1.0])
+    fr, ph, c0 = float(rng.uniform(0.2, 1.0)), float(rng.uniform(0, 2 * np.pi)), float(rng.uniform(-np.pi, np.pi))
+    ripple = 0.1 * abs(f) / fr
+
+    def motion(t):
+        t = np.asarray(t, dtype=float)
+        return c0 + 2 * np.pi * (f * t + np.sign(f) * ripple * np.sin(2 * np.pi * fr * t + ph) / (2 * np.pi))
+    return motion
+
+
+def _make_log(rng, names, scales, rotating=False, close=False):
     duration = float(rng.uniform(10.0, 15.0))
     kind = str(rng.choice(["sine", "multisine", "smooth"]))
     amplitude = float(rng.uniform(0.5, 3.0))
     centre = float(rng.uniform(-np.pi, np.pi))
+    if rotating:
+        motion = _rotation(rng, duration)
+        eff = {n: nominal_effect(n, rng, scales.get(n, 1.0)) for n in names}
+        if "missed_counts" in eff:
+            eff["missed_counts"]["times"] = [duration * x for x in eff["missed_counts"]["times"]]
+        log = simulate_log(rng, motion, duration=duration, step=STEP, truth_step=TRUTH_STEP, effects=eff)
+        # a rotating axis logged in rad, 9 significant digits: its grid must be found from the data
+        log["truth"] = np.array([float(f"{v:.9g}") for v in log["truth"]])
+        return log, eff, {"duration": duration, "motion": "rotating", "amplitude": float("nan")}
     if "wrap_around" in names:
         # the motion must cross the wrap at +-pi
         amplitude = max(amplitude, 1.0)
@@ -134,6 +163,13 @@ def _make_log(rng, names, scales):
     eff = {n: nominal_effect(n, rng, scales.get(n, 1.0)) for n in names}
     if "missed_counts" in eff:
         eff["missed_counts"]["times"] = [duration * x for x in eff["missed_counts"]["times"]]
+        if close:
+            # 2-4 changes within about a second of each other, at least 0.1 s apart
+            k = int(rng.integers(2, 5))
+            t0 = float(rng.uniform(0.2, 0.7)) * duration
+            gaps = rng.uniform(0.1, 1.0 / (k - 1), k - 1)
+            eff["missed_counts"] = {"times": list(t0 + np.concatenate(([0.0], np.cumsum(gaps)))),
+                                    "jumps": [int(rng.choice([-1, 1]) * rng.integers(1, 3)) for _ in range(k)]}
     log = simulate_log(rng, motion, duration=duration, step=STEP, truth_step=TRUTH_STEP, effects=eff)
     return log, eff, {"duration": duration, "motion": kind, "amplitude": amplitude}
 
@@ -236,9 +272,12 @@ def _challenge_job(args):
             return {"kind": kind, "true": name, "seed": seed, "skipped": True, **extra}
         scales = {name: 3.0 * thr}
     rng = np.random.default_rng(seed)
-    log, eff, meta = _make_log(rng, list(names), scales)
+    rotating = kind == "rotating"
+    log, eff, meta = _make_log(rng, list(names), scales, rotating=rotating, close=kind == "missed_close")
     t0 = time.perf_counter()
-    res = select_effects(log["t"], log["truth"], log["measured"], STEP, truth_step=TRUTH_STEP, line_pitch=LINE_PITCH)
+    # a rotating axis's truth is a float channel: its grid (the floor) is the selection's to find
+    res = select_effects(log["t"], log["truth"], log["measured"], STEP, truth_step=None if rotating else TRUTH_STEP,
+                         line_pitch=LINE_PITCH)
     wall = time.perf_counter() - t0
     chosen = [e.name for e in res.effects]
     alts = [(e.name, [a["name"] for a in e.indistinguishable]) for e in res.effects]
@@ -248,7 +287,11 @@ def _challenge_job(args):
             for p, (lo, hi) in e.ci.items():
                 true = eff[e.name][p]
                 cover[f"{e.name}.{p}"] = bool(lo <= true <= hi)
-    ratio = res.after["std"] / res.after["floor_std"] if res.after["floor_std"] > 0 else float("nan")
+    ratio = res.after["std"] / res.after["floor_std"] if res.after["floor_std"] > 0 else float("inf")
+    found = _found_true(res, eff, names, float(log["t"][-1] - log["t"][0]))
+    r_after = log["measured"] - res.model_prediction()
+    ranking = dg.rank_covariates(r_after, dg.covariates_of(log["t"], log["truth"]))
+    top = ranking[0] if ranking else {"name": "", "share": float("nan")}
     # every candidate's delta BIC against the base model (the first round of the selection):
     # tells a miss where the true effect was below the criterion from one where another won
     round1 = {r["effect"]: r["delta_bic"] for r in res.steps if r["step"] == 1}
@@ -269,6 +312,14 @@ def _challenge_job(args):
         "round1_dbic": json.dumps(round1),
         "true_dbic_round1": true_dbic,
         "explained": res.explained,
+        "found_true": found,
+        "top_covariate": top["name"],
+        "top_share": top["share"],
+        # named: the true set (or a named indistinguishable alternative), or, unexplained, the
+        # covariate ranking points at the covariate of the true effect's signature
+        "named": bool(_matches(alts, names) or (not res.explained and names
+                                                and top["name"] == SIGNATURE_COVARIATE.get(names[0]))),
+        "merged": json.dumps({e.name: e.merged_with for e in res.effects if e.merged_with}),
         "coverage": json.dumps(cover),
         "true_params": json.dumps({k: {kk: (vv if not isinstance(vv, list) else vv) for kk, vv in v.items()} for k, v in eff.items()}),
         "fitted_params": json.dumps({e.name: e.params for e in res.effects}),
@@ -285,6 +336,36 @@ def _challenge_job(args):
         **meta,
         **extra,
     }
+
+
+#: The covariate a residual of each effect follows when the effect is not modelled.
+SIGNATURE_COVARIATE = {"slow_drift": "time", "missed_counts": "time", "angle_harmonics": "angle",
+                       "scale_mismatch": "angle", "latency": "velocity", "hysteresis": "direction",
+                       "backlash": "direction"}
+
+
+def _found_true(res, eff, names, t_span: float) -> bool:
+    """The one true effect chosen alone with its true value: every continuous parameter inside
+    its 90 % interval; missed counts with the true jumps, each within 5 ms of its time; the
+    wrap-around period exact. False for clean logs and pairs."""
+    if len(names) != 1 or [e.name for e in res.effects] != list(names):
+        return False
+    (e,) = res.effects
+    true = eff[e.name]
+    if e.name == "missed_counts":
+        k = len(true["times"])
+        if len(e.params) != 2 * k:
+            return False
+        return all(e.params[f"n_{j + 1}"] == true["jumps"][j] and abs(e.params[f"t_{j + 1}"] - true["times"][j]) <= 5e-3
+                   for j in range(k))
+    if e.name == "wrap_around":
+        return e.params["period"] == true["period"]
+    if e.name == "slow_drift":
+        # the simulated drift is rate * (t - t_mid): c1 = rate T / 2, c2 = c3 = 0
+        half = 0.5 * t_span
+        want = {"c1": true["rate"] * half, "c2": 0.0, "c3": 0.0}
+        return all(e.ci[p][0] <= want[p] <= e.ci[p][1] for p in want)
+    return all(e.ci[p][0] <= true.get(p, 0.0) <= e.ci[p][1] for p in e.ci)
 
 
 def wilson(k, n, z=1.645):
@@ -363,6 +444,10 @@ def summarize(df: pd.DataFrame) -> pd.DataFrame:
             "after_over_floor_median": g["after_over_floor"].median(),
             "after_within_10pct": float((np.abs(g["after_over_floor"] - 1) <= 0.1).mean()),
             "explained_rate": float(g["explained"].astype(bool).mean()),
+            "found_true_rate": float(g["found_true"].astype(bool).mean()),
+            "explained_given_found": (float(g.loc[g["found_true"].astype(bool), "explained"].astype(bool).mean())
+                                      if g["found_true"].astype(bool).any() else float("nan")),
+            "named_rate": float(g["named"].astype(bool).mean()),
             "wall_s_median": g["wall_s"].median(),
         }
         rows.append(row)
@@ -426,6 +511,10 @@ def main(argv=None):
                     help="logs per continuous effect at 3x the log's own detection threshold")
     ap.add_argument("--hard-median", type=int, default=10,
                     help="logs per continuous effect at 3x the population median threshold")
+    ap.add_argument("--drift", type=int, default=40, help="logs with an undeclared slow drift (0.2 mrad/s)")
+    ap.add_argument("--missed-close", type=int, default=10,
+                    help="logs with 2-4 missed counts within about a second of each other")
+    ap.add_argument("--rotating", type=int, default=10, help="logs per effect on a rotating axis (float truth)")
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--seed", type=int, default=20261128)
     ap.add_argument("--out", default="results/benchmarks")
@@ -462,6 +551,10 @@ def main(argv=None):
         jobs += [("hard_median", (n,), hard_median, next(seeds)) for _ in range(args.hard_median)]
     for pair in PAIRS:
         jobs += [("pair", pair, scales, next(seeds)) for _ in range(args.pairs)]
+    jobs += [("drift", ("slow_drift",), {}, next(seeds)) for _ in range(args.drift)]
+    jobs += [("missed_close", ("missed_counts",), {}, next(seeds)) for _ in range(args.missed_close)]
+    for n in ROTATING:
+        jobs += [("rotating", (n,), scales, next(seeds)) for _ in range(args.rotating)]
     df = pd.DataFrame(_map(_challenge_job, jobs, args.jobs))
     df["skipped"] = df["skipped"].astype(bool)
     summary = summarize(df)
@@ -473,10 +566,10 @@ def main(argv=None):
         else float("nan")
         for k, t in zip(summary["kind"], summary["true"])]
     tmp = out / "challenge_residuals.csv.tmp"
-    df.to_csv(tmp, index=False)
+    stamp(df).to_csv(tmp, index=False)
     tmp.replace(out / "challenge_residuals.csv")
-    summary.to_csv(out / "challenge_residuals_summary.csv", index=False)
-    sweep.to_csv(out / "challenge_residuals_sweep.csv", index=False)
+    stamp(summary).to_csv(out / "challenge_residuals_summary.csv", index=False)
+    stamp(sweep).to_csv(out / "challenge_residuals_sweep.csv", index=False)
     figure(summary).savefig(out / "challenge_residuals.png", dpi=110, metadata={"Software": None})
 
     ran = df[~df["skipped"]]
@@ -506,6 +599,20 @@ def main(argv=None):
         print(f"hard logs without a threshold below {3.0}x nominal (left out): {n_skip}")
     kf = int((clean["n_chosen"] > 0).sum())
     print(rate_line("clean false positives", kf, len(clean)))
+    print(rate_line("clean logs with no effect", len(clean) - kf, len(clean)))
+    for kind, label in (("drift", "slow drift (undeclared) named by the effect or the covariate ranking"),
+                        ("missed_close", "missed counts close together: the exact set"),
+                        ("rotating", "rotating axes (float truth): the exact set or a named alternative")):
+        g = ran[ran["kind"] == kind]
+        if len(g):
+            col = "named" if kind == "drift" else ("exact" if kind == "missed_close" else "exact_or_indist")
+            print(rate_line(label, int(g[col].astype(bool).sum()), len(g)))
+    found = ran[ran["found_true"].astype(bool)]
+    print(rate_line("one true effect found with its true value -> explained", int(found["explained"].astype(bool).sum()),
+                    len(found)))
+    rot = found[found["kind"] == "rotating"]
+    if len(rot):
+        print("  " + rate_line("of which rotating axes", int(rot["explained"].astype(bool).sum()), len(rot)))
     single = ran[ran["kind"].isin(["single", "hard", "hard_median"])]
     hits = [v for c in single["coverage"] for v in json.loads(c).values()]
     if hits:

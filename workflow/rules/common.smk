@@ -221,7 +221,7 @@ def all_targets():
         targets += ["results/batch/lrde.csv"]
     for log_id, pairs in RESIDUAL_PAIRS.items():
         targets += [f"results/{log_id}/residuals/{p['measured']}/{name}"
-                    for p in pairs for name in ("diagnostics.png", "before_after.png")]
+                    for p in pairs for name in ("diagnostics.png", "before_after.png", "covariates.png")]
     if RESIDUAL_IDS:
         targets += ["results/batch/residuals.csv"]
     targets += [f"results/rigs/{name}/{p['measured']}/report.md" for name, rig in RIGS.items() for p in rig["pairs"]]
@@ -250,6 +250,8 @@ REPORT_FIGURES = {
                              "residual_diagnostics.rst", "Residuals", "{log_id}"),
     "residual_before_after": ("results/{log_id}/residuals/{channel}/before_after.png",
                               "residual_before_after.rst", "Residuals", "{log_id}"),
+    "residual_covariates": ("results/{log_id}/residuals/{channel}/covariates.png",
+                            "residual_covariates.rst", "Residuals", "{log_id}"),
     "ratio_figure": ("results/figures/ratios.png", "ratio_figure.rst", "Paper 000", None),
     "fig6": ("results/figures/fig6_position.png", "fig6.rst", "Paper 000", None),
     "fig7": ("results/figures/fig7_derivatives.png", "fig7.rst", "Paper 000", None),
@@ -278,7 +280,8 @@ def report_figures():
     }
     for kind, same in (("log_comparison", "log_errors"), ("lrde_dwell", "lrde_corner"),
                        ("lrde_bias_cycles", "lrde_corner"),
-                       ("residual_before_after", "residual_diagnostics"), ("fig7", "fig6"),
+                       ("residual_before_after", "residual_diagnostics"),
+                       ("residual_covariates", "residual_diagnostics"), ("fig7", "fig6"),
                        ("rig_compliance", "rig_map"), ("rig_heldout", "rig_map"), ("rig_remains", "rig_map")):
         instances[kind] = instances[same]
     out = {}

@@ -12,6 +12,7 @@ rule residuals:
         # figures: in the report as thumbnails (REPORT_FIGURES, batch.smk)
         diagnostics="results/{log_id}/residuals/{channel}/diagnostics.png",
         before_after="results/{log_id}/residuals/{channel}/before_after.png",
+        covariates="results/{log_id}/residuals/{channel}/covariates.png",
     params:
         pair=lambda wc: residual_pair(wc),
         settings=lambda wc: residual_settings(wc),

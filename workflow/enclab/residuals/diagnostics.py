@@ -44,6 +44,10 @@ __all__ = [
     "spectrum",
     "diagnose",
     "scalar_summary",
+    "heldout_share",
+    "rank_covariates",
+    "covariates_of",
+    "covariate_sentence",
 ]
 
 
@@ -389,3 +393,103 @@ def scalar_summary(diag: Mapping) -> dict:
         "spread_of_bin_means": {k: spread(cond[k]) for k in
                                 ("angle_mod_2pi", "angle_mod_pitch", "count_mod_4", "velocity", "time")},
     }
+
+
+#: What a residual that follows each covariate points to (the words of the ranking).
+COVARIATE_HINTS = {
+    "time": "a slow drift or creep",
+    "angle": "a repeatable error of the measured angle (a calibration map)",
+    "input angle": "an error periodic or repeatable in the input-side angle (gear mesh, motor encoder)",
+    "velocity": "a speed-dependent lag or friction",
+    "acceleration": "inertia or a compliance driven by the acceleration torque",
+    "direction": "a direction-dependent error (play, friction, hysteresis)",
+}
+
+
+def _smooth_fit(x, r, train, n_bins):
+    """Binned means of ``r[train]`` over quantile bins of ``x[train]``, joined linearly
+    (constant beyond the outer bin centres): a smooth function of ``x`` fitted on ``train``."""
+    edges = _quantile_edges(x[train], n_bins)
+    b = binned(x[train], r[train], edges)
+    ok = b["n"] > 0
+    # the mean x of each bin (not the bin centre): exact for a covariate with few values
+    xs = binned(x[train], x[train], edges)["mean"][ok]
+    ys = b["mean"][ok]
+    order = np.argsort(xs)
+    return lambda z: np.interp(z, xs[order], ys[order])
+
+
+def heldout_share(x, r, *, n_blocks: int = 10, n_bins: int = 16) -> float:
+    """Held-out share of the variance of ``r`` that a smooth function of ``x`` explains.
+
+    Time is cut into ``n_blocks`` contiguous blocks; the smooth function (binned means over
+    ``n_bins`` quantile bins of ``x``, joined linearly) is fitted on the even blocks and scored
+    on the odd ones, and the other way round. The share is ``1 - SSE_held_out / SS``, with
+    ``SS`` the held-out sum of squares about the training mean: 0 when ``x`` tells nothing
+    (it can come out slightly negative; clipped at 0), 1 when ``r`` is a function of ``x``.
+    Contiguous blocks keep a slowly varying residual from scoring its own neighbours.
+    """
+    x, r = _arrays(x, r, names=("x", "r"))
+    blocks = np.array_split(np.arange(r.size), n_blocks)
+    even = np.concatenate(blocks[0::2])
+    odd = np.concatenate(blocks[1::2])
+    sse = ss = 0.0
+    for train, test in ((even, odd), (odd, even)):
+        f = _smooth_fit(x, r, train, n_bins)
+        sse += float(np.sum((r[test] - f(x[test])) ** 2))
+        ss += float(np.sum((r[test] - np.mean(r[train])) ** 2))
+    if ss <= 0:
+        return 0.0
+    return float(max(0.0, 1.0 - sse / ss))
+
+
+def covariates_of(t, truth, aux: Mapping | None = None) -> dict:
+    """The candidate covariates of a residual: time, the angle, its velocity, acceleration and
+    direction of motion (from the truth), and every aux channel under its own name (an
+    ``input angle`` entry is the input side of a gear)."""
+    t, truth = _arrays(t, truth, names=("t", "truth"))
+    v = velocity(t, truth)
+    # the acceleration of a quantized angle: smooth the velocity over ~21 samples first
+    k = min(21, v.size)
+    vs = np.convolve(v, np.ones(k) / k, mode="same")
+    out = {"time": t, "angle": truth, "velocity": vs, "acceleration": np.gradient(vs, t),
+           "direction": np.sign(vs)}
+    for name, arr in (aux or {}).items():
+        out[str(name)] = np.asarray(arr, dtype=float)
+    return out
+
+
+def rank_covariates(r, covariates: Mapping, *, n_blocks: int = 10, n_bins: int = 16) -> list[dict]:
+    """Covariates ranked by the held-out share of the variance of ``r`` each explains
+    (:func:`heldout_share`), largest first: ``[{"name", "share", "hint"}]``. A covariate that
+    is constant over the log is left out."""
+    (r,) = _arrays(r, names=("r",))
+    out = []
+    for name, x in covariates.items():
+        x = np.asarray(x, dtype=float)
+        if x.shape != r.shape:
+            raise ValueError(f"covariate {name!r} has shape {x.shape}, the residual {r.shape}")
+        if not np.all(np.isfinite(x)) or float(np.ptp(x)) == 0.0:
+            continue
+        out.append({"name": str(name), "share": heldout_share(x, r, n_blocks=n_blocks, n_bins=n_bins),
+                    "hint": COVARIATE_HINTS.get(str(name), f"an effect of the logged channel {name!r}")})
+    out.sort(key=lambda d: -d["share"])
+    return out
+
+
+def covariate_sentence(ranking, min_share: float = 0.1) -> str:
+    """The ranking in words: ``"the rest follows time: 81 % of its variance, a slow drift or
+    creep"``, with the runners-up above ``min_share``; or that no candidate explains
+    ``min_share`` of it."""
+    if not ranking:
+        return "no covariate to rank the rest against"
+    top = ranking[0]
+    if top["share"] < min_share:
+        return (f"the rest follows none of {', '.join(d['name'] for d in ranking)}: the best, "
+                f"{top['name']}, explains {100 * top['share']:.0f} % of its variance held out "
+                "(noise-like, or driven by something not logged)")
+    text = f"the rest follows {top['name']}: {100 * top['share']:.0f} % of its variance, {top['hint']}"
+    more = [d for d in ranking[1:3] if d["share"] >= min_share]
+    if more:
+        text += "; then " + ", ".join(f"{d['name']} ({100 * d['share']:.0f} %)" for d in more)
+    return text

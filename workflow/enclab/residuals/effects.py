@@ -48,6 +48,7 @@ __all__ = [
     "TimestampJitter",
     "ScaleMismatch",
     "Compliance",
+    "SlowDrift",
     "MissedCounts",
     "WrapAround",
     "EFFECTS",
@@ -192,6 +193,13 @@ class Effect:
         """Extra derived quantities for reports (e.g. amplitude and phase)."""
         return {}
 
+    #: The motion that tells this effect apart from others it can trade off against (words).
+    separated_by = "a longer, more varied motion"
+
+    def caveat(self, ctx) -> str | None:
+        """What this log's motion cannot tell about the effect's parameters (words), or None."""
+        return None
+
     def __repr__(self) -> str:
         return f"{type(self).__name__}()"
 
@@ -234,6 +242,8 @@ class Hysteresis(Effect):
     param_names = ("h",)
     order = 10
 
+    separated_by = "slow reversals (the play's ramp against the dead band's step)"
+
     def bounds(self, ctx):
         lim = _span(ctx)
         return [(-lim, lim)]
@@ -266,6 +276,8 @@ class Backlash(Effect):
     # the play operator is non-linear in w: the linearised guess can land in a worse basin
     multistart = True
 
+    separated_by = "slow reversals over more than the play's width"
+
     def bounds(self, ctx):
         lim = _span(ctx)
         return [(-lim, lim)]
@@ -293,6 +305,15 @@ class AngleHarmonics(Effect):
     name = "angle_harmonics"
     param_names = ("a1", "b1", "a2", "b2")
     order = 20
+
+    separated_by = "a motion over a full turn or more (a harmonic returns, a scale error grows)"
+
+    def caveat(self, ctx):
+        stroke = float(np.ptp(ctx.truth))
+        if stroke >= 2.0 * np.pi:
+            return None
+        return (f"over a stroke of {stroke:.2g} rad the harmonic coefficients describe a smooth error of "
+                "the angle there, not the disc's run-out (a motion over a full turn pins them)")
 
     def applicable(self, ctx) -> bool:
         # a harmonic of the angle is only told apart from a constant on a travel of >= ~1 rad
@@ -378,8 +399,10 @@ class QuadratureEdges(Effect):
 class Latency(Effect):
     """Latency or channel skew ``tau`` (s): the measured channel reads the angle ``tau`` late.
 
-    ``theta_eff(t) = theta(t - tau) ~ theta - tau v``. Signature: residual ``-tau v``,
-    proportional to velocity. ``tau`` is signed (the measured channel may lead).
+    ``theta_eff(t) = theta(t - tau)``, evaluated on a cubic spline of the smooth
+    reconstruction of the angle (``aux["_smooth_spline"]``; ``theta - tau v`` without one).
+    Signature: residual ``-tau v`` to first order, proportional to velocity, plus
+    ``tau^2 a / 2``. ``tau`` is signed (the measured channel may lead).
 
     Applied first (``order`` 5): the reading is the whole measured side delayed, e.g.
     ``play(theta)(t - tau)`` behind a gear, and a rate-independent operator commutes with a time
@@ -393,6 +416,8 @@ class Latency(Effect):
     param_names = ("tau",)
     order = 5
 
+    separated_by = "a range of speeds with dwells and slow reversals"
+
     def applicable(self, ctx) -> bool:
         return float(np.max(np.abs(ctx.velocity))) > 0
 
@@ -402,7 +427,15 @@ class Latency(Effect):
         return [(-lim, lim)]
 
     def apply(self, theta, t, velocity, aux, params):
-        return theta - params[0] * velocity
+        tau = float(params[0])
+        spline = aux.get("_smooth_spline")
+        if spline is None:  # no reconstruction available: first order
+            return theta - tau * velocity
+        # the delayed sample itself, not its first-order expansion: theta(t - tau) - theta(t)
+        # on the smooth reconstruction, added to the reading so the truth's own rounding stays
+        # the exact model's (the curvature term tau^2 a / 2 of a 1.7 ms delay on a 1 Hz swing is
+        # 5 % of a 4096-cpr step: a first-order model left it to a spurious timestamp jitter)
+        return theta + (spline(t - tau) - aux["_smooth"])
 
 
 class TimestampJitter(Effect):
@@ -418,6 +451,8 @@ class TimestampJitter(Effect):
     kind = "noise"
     order = 26
     boundary = ("sigma_t",)
+
+    separated_by = "a range of speeds"
 
     def applicable(self, ctx) -> bool:
         return float(np.max(np.abs(ctx.velocity))) > 0
@@ -445,6 +480,15 @@ class ScaleMismatch(Effect):
     param_names = ("g",)
     order = 21
 
+    separated_by = "a motion over a full turn or more (a harmonic returns, a scale error grows)"
+
+    def caveat(self, ctx):
+        stroke = float(np.ptp(ctx.truth))
+        if stroke >= 2.0 * np.pi:
+            return None
+        return (f"over a stroke of {stroke:.2g} rad the scale is the mean slope of the angle error there: "
+                "a once-per-turn error adds its local slope (a motion over a full turn separates them)")
+
     def applicable(self, ctx) -> bool:
         return float(np.ptp(ctx.truth)) > 4.0 * ctx.step
 
@@ -467,6 +511,8 @@ class Compliance(Effect):
     param_names = ("kappa",)
     order = 12
 
+    separated_by = "the same angles and speeds at different loads"
+
     def applicable(self, ctx) -> bool:
         tq = ctx.aux.get("torque") if ctx.aux else None
         return tq is not None and float(np.ptp(tq)) > 0
@@ -478,6 +524,48 @@ class Compliance(Effect):
     def apply(self, theta, t, velocity, aux, params):
         tq = aux["torque"]
         return theta + params[0] * (tq - aux["_torque_ref"])
+
+
+class SlowDrift(Effect):
+    """Slow drift of the measured reading in time (thermal growth, creep, a drifting zero).
+
+    ``theta_eff = theta + c1 P1(s) + c2 P2(s) + c3 P3(s)`` with ``P_k`` the Legendre
+    polynomials of the normalised time ``s = 2 (t - t_mid) / T`` in ``[-1, 1]`` (``T`` the
+    log's duration; ``P0`` is the quantizer offset). Coefficients in rad; a linear drift of
+    ``rate`` rad/s is ``c1 = rate T / 2``. Derived: ``mean_rate`` (rad/s, end minus start over
+    ``T``) and ``peak_to_peak`` (rad). Signature: the residual ``measured - truth`` wanders
+    smoothly with time, the same at every angle and speed: a *ramp*, where missed counts give
+    *steps* of whole counts (a 0.2 mrad/s drift read by a 1.5 mrad step is a staircase of
+    "missed counts" every 7.7 s, each step off by up to half a count on both sides).
+    """
+
+    name = "slow_drift"
+    param_names = ("c1", "c2", "c3")
+    order = 25
+
+    separated_by = "passes over the same angles spread over the whole log"
+
+    def applicable(self, ctx) -> bool:
+        self.duration = float(ctx.t[-1] - ctx.t[0])
+        return self.duration > 0
+
+    def _basis(self, t, aux):
+        t0, t1 = aux["_t_range"]
+        s = (2.0 * np.asarray(t, dtype=float) - (t0 + t1)) / (t1 - t0)
+        return s, 0.5 * (3.0 * s * s - 1.0), 0.5 * (5.0 * s**3 - 3.0 * s)
+
+    def apply(self, theta, t, velocity, aux, params):
+        p1, p2, p3 = self._basis(t, aux)
+        return theta + params[0] * p1 + params[1] * p2 + params[2] * p3
+
+    def derived(self, params):
+        c1, c2, c3 = params["c1"], params["c2"], params["c3"]
+        s = np.linspace(-1.0, 1.0, 401)
+        curve = c1 * s + c2 * 0.5 * (3 * s * s - 1) + c3 * 0.5 * (5 * s**3 - 3 * s)
+        out = {"peak_to_peak": float(np.ptp(curve))}
+        duration = getattr(self, "duration", float("nan"))
+        out["mean_rate"] = 2.0 * (c1 + c3) / duration if duration > 0 else float("nan")
+        return out
 
 
 class MissedCounts(Effect):
@@ -508,48 +596,89 @@ class MissedCounts(Effect):
         return theta - aux["_step"] * shift
 
     @staticmethod
-    def detect(t, resid_counts, max_changes: int = 4, min_len: int = 20):
-        """Changepoints of an integer level in ``resid_counts`` (counts) by binary segmentation.
+    def detect(t, resid_counts, max_changes: int = 6, min_len: int = 20, informative=None):
+        """Changepoints of an integer level in ``resid_counts`` (counts).
 
-        Returns ``(times, jumps)``: at each accepted change the median level on either side
-        differs by a non-zero whole number of counts, and every segment between changes sits
-        on its level (at least 80 % of its samples within half a count of its median);
-        otherwise no change is returned.
+        The level is the running median over ``2 min_len + 1`` samples rounded to whole
+        counts: the isolated one-count flips of the exact model (the truth's own rounding)
+        vanish in it, and every step that lasts at least ``min_len`` samples survives however
+        close it is to the next (binary segmentation by cumulative sums merged steps a fraction
+        of a second apart into one wrong jump, or found none). Returns ``(times, jumps)``; no
+        change when there are more than ``max_changes`` (a residual that follows the motion is
+        no missed count) or when a segment between changes does not sit on its level (at least
+        80 % of its samples within half a count of its median).
+
+        ``informative`` (boolean, optional) marks the samples whose predicted count the
+        truth's own rounding cannot flip; a level between two changes must hold ``min_len`` of
+        them. During a dwell next to a transition of the measured grid every sample flips
+        together (one truth reading, one rounding error), which looks like a missed count and
+        its return tens of ms later on a clean log: such a pulse is dropped.
         """
+        from scipy.ndimage import median_filter
+
         r = np.asarray(resid_counts, dtype=float)
-        segments = [(0, r.size)]
+        t = np.asarray(t, dtype=float)
+        if r.size < 2 * min_len + 1:
+            return [], []
+        m = median_filter(r, size=2 * min_len + 1, mode="nearest")
+        # the levels sit a common fraction of a count off the integers (the offset fitted
+        # without the changes lies between levels): round relative to that fraction, the
+        # circular mean of the running median's fractional part
+        ang = 2.0 * np.pi * m
+        frac = math.atan2(float(np.mean(np.sin(ang))), float(np.mean(np.cos(ang)))) / (2.0 * np.pi)
+        level = np.round(m - frac)
+        idx = np.flatnonzero(np.diff(level) != 0) + 1
+        # plateaus: runs of one level at least min_len long; a change is where the next
+        # plateau of another level begins
+        starts = np.concatenate(([0], idx))
+        ends = np.concatenate((idx, [r.size]))
+        plateaus = [(a, b, level[a]) for a, b in zip(starts, ends) if b - a >= min_len]
+        if not plateaus:
+            return [], []
         cps = []
-        for _ in range(max_changes):
-            best = None
-            for a, b in segments:
-                if b - a < 2 * min_len:
-                    continue
-                seg = r[a:b]
-                cs = np.cumsum(seg - seg.mean())
-                i = int(np.argmax(np.abs(cs[min_len - 1 : b - a - min_len]))) + min_len
-                jump = np.median(seg[i:]) - np.median(seg[:i])
-                score = abs(cs[i - 1])
-                if round(jump) != 0 and (best is None or score > best[0]):
-                    best = (score, a, b, a + i, int(round(jump)))
-            if best is None:
-                break
-            _, a, b, cp, jump = best
-            cps.append((cp, jump))
-            segments.remove((a, b))
-            segments += [(a, cp), (cp, b)]
-        cps.sort()
-        # a missed count leaves a piecewise-constant integer residual: every segment must sit
-        # on its level (>= 80 % of samples within half a count); a residual that alternates
-        # with the direction of motion (backlash, hysteresis) is no missed count
+        cur = plateaus[0]
+        for p in plateaus[1:]:
+            if p[2] != cur[2]:
+                cps.append((int(p[0]), int(p[2] - cur[2])))
+            cur = p
+        if not cps or len(cps) > max_changes:
+            return [], []
+        # refine each change within the filter's reach: the split that puts the most samples
+        # of the window on the level of their side
+        rl = np.round(r - frac)
+        refined = []
+        for cp, jump in cps:
+            a, b = max(cp - min_len, 1), min(cp + min_len, r.size - 1)
+            lo_lev, hi_lev = level[max(cp - min_len - 1, 0)], level[min(cp + min_len, r.size - 1)]
+            win = rl[a - 1:b + 1]
+            left = np.cumsum(win == lo_lev)
+            right = np.cumsum((win == hi_lev)[::-1])[::-1]
+            score = left[:-1] + right[1:]
+            refined.append((a + int(np.argmax(score)), jump))
+        cps = refined
+        if informative is not None:
+            # a level held only by samples the truth's rounding can flip is no level: a pulse
+            # over such a stretch (a change and its return) is dropped; any other change
+            # bounding one means the residual is no staircase of missed counts
+            inf = np.asarray(informative, dtype=bool)
+            while True:
+                edges = [0] + [cp for cp, _ in cps] + [r.size]
+                weak = [i for i in range(1, len(edges) - 2) if inf[edges[i]:edges[i + 1]].sum() < min_len]
+                if not weak:
+                    break
+                i = weak[0]
+                if cps[i - 1][1] + cps[i][1] != 0:
+                    return [], []
+                del cps[i - 1:i + 1]
+            if not cps:
+                return [], []
         bounds = [0] + [cp for cp, _ in cps] + [r.size]
         for a, b in zip(bounds[:-1], bounds[1:]):
             seg = r[a:b]
             if np.mean(np.abs(seg - np.median(seg)) <= 0.5) < 0.8:
                 return [], []
-        times, jumps = [], []
-        for cp, jump in cps:
-            times.append(float(t[cp]))
-            jumps.append(-jump)  # measured lower by n after t: residual (measured - model) drops by n
+        times = [float(t[cp]) for cp, _ in cps]
+        jumps = [-j for _, j in cps]  # measured lower by n after t: residual drops by n
         return times, jumps
 
 
@@ -644,6 +773,7 @@ EFFECTS = (
     AngleHarmonics,
     Latency,
     TimestampJitter,
+    SlowDrift,
     LinePitchHarmonics,
     QuadratureEdges,
     MissedCounts,

@@ -100,6 +100,12 @@ def format_effects(effects) -> str:
     (``"NOT DISTINGUISHABLE from hysteresis (swap-in dBIC 1.7 < 10)"``)."""
     out = []
     for e in effects or []:
+        if e.get("merged_with"):
+            # separate values of effects the motion cannot separate are not physical values
+            ptp = (e.get("derived") or {}).get("joint_peak_to_peak", float("nan"))
+            out.append(f"{e['name']}(merged with {'+'.join(e['merged_with'])}: joint shift {ptp:.4g} rad "
+                       f"peak to peak, dBIC={e.get('delta_bic', float('nan')):.3g})")
+            continue
         ci = e.get("ci") or {}
         params = ", ".join(
             f"{k}={v:.4g}" + (f" [{ci[k][0]:.4g}, {ci[k][1]:.4g}]" if k in ci and ci[k] is not None else "")
@@ -154,7 +160,8 @@ def analyse_channel(df: pd.DataFrame, meta: Mapping, pair: Mapping, settings: Ma
         ``residuals.json``: channel names, steps, offset, the diagnostics before and after,
         the selection (``to_summary()`` plus ``explained`` and ``message``).
     figures : dict
-        ``diagnostics`` and ``before_after`` matplotlib Figures.
+        ``diagnostics``, ``before_after`` and ``covariates`` (the residual after the effects
+        against its top covariates) matplotlib Figures.
     table : DataFrame
         The before/after table: one row per stage with std, mean, rms, max |r| and the floor.
 
@@ -180,6 +187,13 @@ def analyse_channel(df: pd.DataFrame, meta: Mapping, pair: Mapping, settings: Ma
                 "(a float channel without a detected grid); declare native_step in the manifest "
                 "or analysis.residuals.step")
         step = float(cfg["step"])
+    if truth_step is None:
+        # a float truth channel: the grid it is on, if any (the exact-model floor needs it; a
+        # grid coarser than the measured step is no truth grid but a coincidence of the motion)
+        from enclab.residuals.select import estimate_grid_step
+
+        est = estimate_grid_step(truth)
+        truth_step = est if 0.0 < est <= step else None
     if truth_step is not None and truth_step > step:
         raise ValueError(f"log {log_id!r}: truth channel {pair['truth']!r} (step {truth_step:.6g} rad) "
                          f"is coarser than measured channel {pair['measured']!r} (step {step:.6g} rad)")
@@ -204,7 +218,18 @@ def analyse_channel(df: pd.DataFrame, meta: Mapping, pair: Mapping, settings: Ma
     v = dg.velocity(t, truth)
     after_diag = {"residual": dg.moments(r_after), "velocity_sign": dg.velocity_sign(v, r_after)}
     selection = dict(res.to_summary())
-    selection.update(explained=bool(res.explained), message=str(res.message))
+    # Outside the catalogue: what the rest follows, ranked by held-out share of its variance
+    others = {c["name"]: channel_values(df, meta, c["name"])[0] for c in meta["channels"]
+              if c["name"] not in (pair["measured"], pair["truth"])}
+    covariates = dg.covariates_of(t, truth, others)
+    ranking = dg.rank_covariates(r_after, covariates)
+    message = str(res.message)
+    outside = None
+    if not res.explained:
+        outside = dg.covariate_sentence(ranking)
+        message = f"{message}; {outside}"
+    selection.update(explained=bool(res.explained), message=message, covariates=ranking,
+                     outside_catalogue=outside)
     block = {
         "log_id": log_id, "measured": pair["measured"], "truth": pair["truth"],
         "step": step, "truth_step": truth_step, "offset": offset,
@@ -221,6 +246,7 @@ def analyse_channel(df: pd.DataFrame, meta: Mapping, pair: Mapping, settings: Ma
         "before_after": plots.before_after_figure(t, truth, measured, diag["prediction"], after_pred,
                                                   step, title=title,
                                                   effects_label=_effects_label(res.effects)),
+        "covariates": plots.covariates_figure(r_after, covariates, ranking, step, title=title),
     }
     table = before_after_table(log_id, pair, step, diag, r_after, res.before, res.after,
                                selection["effects"], explained=bool(res.explained))
@@ -294,6 +320,8 @@ def batch_rows(summary: Mapping) -> list[dict]:
             "verdict": verdict(sel.get("explained"), ratio),
             "effects": format_effects(effects),
             "indistinguishable": indistinguishable_label(effects),
+            # what the rest follows when unexplained (held-out covariate ranking, in words)
+            "outside_catalogue": sel.get("outside_catalogue") or "",
             "message": sel.get("message"),
         })
     return rows

@@ -12,7 +12,7 @@ from collections.abc import Mapping
 import numpy as np
 from matplotlib.figure import Figure
 
-__all__ = ["diagnostics_figure", "before_after_figure"]
+__all__ = ["diagnostics_figure", "before_after_figure", "covariates_figure"]
 
 _DEG = 180.0 / np.pi
 
@@ -171,4 +171,50 @@ def before_after_figure(t, truth, measured, before, after, step: float, *, title
     a2.set_title("residual histogram", fontsize=9)
     a2.legend(fontsize=7)
     fig.suptitle(f"{title}  effects: {effects_label or 'none'}", fontsize=10)
+    return fig
+
+
+def covariates_figure(r, covariates: Mapping, ranking, step: float, *, title: str = "", top: int = 3,
+                      n_bins: int = 24, max_points: int = 20000) -> Figure:
+    """The residual after the effects against its top covariates.
+
+    Parameters
+    ----------
+    r : array_like
+        Residual after the selected effects (rad).
+    covariates : dict
+        ``{name: array}`` (:func:`enclab.residuals.diagnostics.covariates_of`).
+    ranking : list of dict
+        :func:`enclab.residuals.diagnostics.rank_covariates` result (held-out shares).
+    step : float
+        Measured channel's step (rad); the residual is shown in steps.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        One panel per covariate (at most ``top``): the samples, their binned mean, and the
+        held-out share in the title.
+    """
+    from enclab.residuals.diagnostics import binned
+
+    r = np.asarray(r, dtype=float) / step
+    shown = list(ranking)[:top]
+    fig = Figure(figsize=(4.2 * max(len(shown), 1), 3.8), layout="constrained")
+    axs = np.atleast_1d(fig.subplots(1, max(len(shown), 1)))
+    stride = max(1, r.size // max_points)
+    for ax, d in zip(axs, shown):
+        x = np.asarray(covariates[d["name"]], dtype=float)
+        ax.plot(x[::stride], r[::stride], ",", color="0.6")
+        edges = np.unique(np.quantile(x, np.linspace(0, 1, n_bins + 1)))
+        if edges.size >= 2:
+            b = binned(x, r, edges)
+            ok = b["n"] > 0
+            ax.plot(binned(x, x, edges)["mean"][ok], b["mean"][ok], "o-", ms=3, color="C3", label="binned mean")
+        ax.axhline(0.0, color="k", lw=0.6)
+        ax.set_xlabel(d["name"])
+        ax.set_title(f"{d['name']}: {100 * d['share']:.0f} % held out", fontsize=9)
+    axs[0].set_ylabel("residual after the effects [steps]")
+    if not shown:
+        axs[0].text(0.5, 0.5, "no covariate", ha="center", va="center", transform=axs[0].transAxes)
+    fig.suptitle(f"{title}  what the rest follows", fontsize=10)
     return fig

@@ -74,7 +74,12 @@ uniform within ``truth_step / 2`` of the truth and Gaussian noise effects, each 
 is ``floor(mu) + j`` with probabilities computed in closed form, giving ``E[r_i]`` and
 ``E[r_i^2]``. ``floor_std`` is the std this implies; its 90 % interval is from the standard
 error of ``mean(r_i^2 - E[r_i^2])`` over 20 contiguous blocks. ``explained`` holds when the
-residual variance is not above the floor's interval.
+residual variance is not significantly above the floor: not above ``floor_limit``, the floor
+variance plus the one-sided 99 % Student t quantile (19 degrees of freedom) times that standard
+error. The test is one-sided at 1 % because "explained" is what an exact model must get: with
+the 90 % interval's upper end, 5 % of logs whose one true effect was found with its true value
+would be called unexplained by chance alone. The search itself stops at the stricter 90 %
+upper end (a further effect is still looked for while the residual is in between).
 """
 from __future__ import annotations
 
@@ -82,7 +87,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import optimize, signal, stats
+from scipy import interpolate, optimize, signal, stats
 from scipy.special import log_ndtr, ndtr
 
 from enclab.residuals import effects as fx
@@ -94,6 +99,9 @@ _LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
 _Z90 = stats.norm.ppf(0.95)
 _CI_BLOCKS = 40
 _FLOOR_BLOCKS = 20
+# one-sided 99 % quantile of Student's t with _FLOOR_BLOCKS - 1 degrees of freedom: the
+# verdict's test of "residual variance above the floor"
+_T99_BLOCKS = float(stats.t.ppf(0.99, _FLOOR_BLOCKS - 1))
 _MAX_FIT_SAMPLES = 50_000
 _LOG_SX_BOUNDS = (-3.0, 1.5)
 
@@ -112,6 +120,9 @@ class FittedEffect:
     alternatives: list = field(default_factory=list)
     distinguish_bic: float = 10.0
     delta_bic_final: float = float("nan")
+    caveat: str | None = None
+    merged_with: list = field(default_factory=list)
+    separated_by: str = ""
 
     @property
     def indistinguishable(self) -> list:
@@ -137,6 +148,10 @@ class FittedEffect:
             "alternatives": [alt(a) for a in self.alternatives],
             "distinguish_bic": float(self.distinguish_bic),
             "indistinguishable_from": [alt(a) for a in self.indistinguishable],
+            # what the motion cannot tell about the parameters; the effects it cannot be
+            # separated from (then params are not physical values: see "merged")
+            "caveat": self.caveat,
+            "merged_with": list(self.merged_with),
         }
 
 
@@ -488,7 +503,10 @@ def _discrete_candidate(name, cur: _Fitted, ctx):
         if any(isinstance(e, fx.MissedCounts) for e in cur.model.effects):
             return None
         resid = ctx.counts - (mu - 0.5)
-        times, jumps = fx.MissedCounts.detect(ctx.t, resid)
+        # samples farther than the truth's half step (in counts) from a transition of floor(mu)
+        half = 0.5 * ctx.truth_step / ctx.step
+        informative = np.abs(mu - np.round(mu)) > half
+        times, jumps = fx.MissedCounts.detect(ctx.t, resid, informative=informative)
         return fx.MissedCounts(times, jumps) if times else None
     if name == "wrap_around":
         if any(isinstance(e, fx.WrapAround) for e in cur.model.effects):
@@ -524,8 +542,9 @@ def _heldout_gain(cur: _Fitted, new: _Fitted, ctx, n_folds):
     return gain
 
 
-def _intervals(fitted: _Fitted, ctx):
-    """Sandwich standard errors of all free parameters (see module notes)."""
+def _intervals(fitted: _Fitted, ctx, with_cov: bool = False):
+    """Sandwich standard errors of all free parameters (see module notes); with ``with_cov``
+    also the model-based covariance ``I^-1`` (SI units)."""
     model, x = fitted.model, fitted.x
     scales = model.scales(ctx)
     _, g = _scores(model, ctx, x, scales, ctx.fit_idx)
@@ -537,7 +556,58 @@ def _intervals(fitted: _Fitted, ctx):
     sand = inv @ meat @ inv
     # diag of a PSD matrix, up to rounding: clip the -1e-30s of an ill-conditioned pinv
     var = np.maximum(np.maximum(np.diag(inv), np.diag(sand)), 0.0)
+    if with_cov:
+        return np.sqrt(var) * scales, inv * np.outer(scales, scales)
     return np.sqrt(var) * scales
+
+
+#: Parameter correlation above which two chosen effects are not separable on the log's motion.
+_MERGE_CORR = 0.95
+
+
+def _merge_confounded(fitted_effects, effects, cur: _Fitted, cov, ctx):
+    """Mark chosen effects whose parameters the log's motion cannot separate (a correlation of
+    their estimates above ``_MERGE_CORR``, or an interval that spans its whole range): each
+    gets ``merged_with`` (the others of its group) and ``derived["joint_peak_to_peak"]``, the
+    peak-to-peak over the log of the group's joint shift of the angle, which the data do
+    determine; the separate values are then not physical values and are not reported as such.
+    """
+    n = len(effects)
+    sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    linked = {i: set() for i in range(n)}
+    for a in range(n):
+        for b in range(a + 1, n):
+            if effects[a].kind == "discrete" or effects[b].kind == "discrete":
+                continue
+            sa = cur.model.slices[cur.model.effects.index(effects[a])]
+            sb = cur.model.slices[cur.model.effects.index(effects[b])]
+            block = cov[sa, sb] / np.maximum(np.outer(sd[sa], sd[sb]), 1e-300)
+            both_loose = fitted_effects[a].derived.get("confounded") and fitted_effects[b].derived.get("confounded")
+            if (np.isfinite(block).all() and np.max(np.abs(block)) > _MERGE_CORR) or both_loose:
+                linked[a].add(b)
+                linked[b].add(a)
+    seen = set()
+    for i in range(n):
+        if i in seen or not linked[i]:
+            continue
+        group, todo = set(), [i]
+        while todo:
+            j = todo.pop()
+            if j not in group:
+                group.add(j)
+                todo += list(linked[j])
+        seen |= group
+        # the group's joint shift: the model with and without the group's parameters at null
+        x0 = cur.x.copy()
+        for j in group:
+            sl = cur.model.slices[cur.model.effects.index(effects[j])]
+            x0[sl] = effects[j].null()
+        mu1, _ = cur.model.forward(ctx, cur.x)
+        mu0, _ = cur.model.forward(ctx, x0)
+        ptp = float(np.ptp((mu1 - mu0) * ctx.step))
+        for j in group:
+            fitted_effects[j].merged_with = sorted(effects[k].name for k in group if k != j)
+            fitted_effects[j].derived["joint_peak_to_peak"] = ptp
 
 
 def _floor_probs(mu, half, sigma, js):
@@ -577,6 +647,7 @@ def residual_stats(fitted: _Fitted, ctx) -> dict:
     bm = np.array([b.mean() for b in np.array_split(d, _FLOOR_BLOCKS)])
     se = float(bm.std(ddof=1) / math.sqrt(bm.size))
     lo, hi = max(floor_var - _Z90 * se, 0.0), floor_var + _Z90 * se
+    limit = floor_var + _T99_BLOCKS * se
     return {
         "metric": METRIC,
         "std": math.sqrt(var),
@@ -584,6 +655,7 @@ def residual_stats(fitted: _Fitted, ctx) -> dict:
         "rms": float(np.sqrt(np.mean(r**2))),
         "floor_std": math.sqrt(max(floor_var, 0.0)),
         "floor_ci": (math.sqrt(lo), math.sqrt(hi)),
+        "floor_limit": math.sqrt(limit),
         "mismatch_fraction": float(np.mean(r != 0)),
         "loglik": float(fitted.ll),
     }
@@ -642,22 +714,48 @@ class SelectionResult:
         }
 
 
-def estimate_grid_step(x, rtol: float = 1e-6) -> float:
-    """The grid step of a quantized signal (smallest non-zero jump dividing all jumps), or 0.
+def estimate_grid_step(x, rtol: float = 1e-8) -> float:
+    """The grid step of a quantized signal (the common divisor of all its jumps), or 0.
 
-    Returns 0 when the signal is not on a common grid (a continuous channel).
+    The step is the real greatest common divisor of the sample-to-sample jumps (Euclid's
+    algorithm on the distinct jump sizes, remainders below ``rtol * max|x|`` taken as zero),
+    refined by least squares over every jump. It need not be the smallest jump: a fast motion
+    (a rotating axis moving 32 or 33 truth steps per sample) has no jump of one step. ``rtol``
+    admits the rounding of values written with 9 significant digits far from zero (60 rad of a
+    10-turn log). Returns 0 when the jumps have no common divisor well above that tolerance
+    and no more than 2**20 times below the largest jump (a continuous channel).
     """
     x = np.asarray(x, float)
     d = np.abs(np.diff(x))
     scale = max(float(np.max(np.abs(x))), 1e-300)
-    d = d[d > 1e3 * np.finfo(float).eps * scale]
+    tol = max(rtol * scale, 1e3 * np.finfo(float).eps * scale)
+    d = d[d > tol]
     if d.size == 0:
         return 0.0
-    q = float(np.min(d))
-    ratio = d / q
-    if np.all(np.abs(ratio - np.round(ratio)) <= max(rtol * np.max(ratio), 1e-6)):
-        return q
-    return 0.0
+    sizes = np.sort(d)
+    # distinct jump sizes (within the tolerance), largest first
+    distinct = sizes[np.concatenate(([True], np.diff(sizes) > 2.0 * tol))][::-1]
+    q = float(distinct[0])
+    for b in distinct[1:]:
+        a, b = max(q, float(b)), min(q, float(b))
+        # nearest-integer Euclid; the rounding error of a remainder grows with the quotient
+        # (a - n b carries n times b's error), so "zero" is judged against that
+        while True:
+            n = round(a / b)
+            rem = abs(a - n * b)
+            if rem <= 2.0 * tol * (1.0 + n):
+                break
+            a, b = b, rem
+            if b <= 10.0 * tol:
+                return 0.0
+        q = b
+    n = np.round(d / q)
+    if q <= 10.0 * tol or float(np.max(n)) > 2.0**20:
+        return 0.0
+    q = float(np.dot(d, n) / np.dot(n, n))
+    if np.max(np.abs(d / q - n)) > 0.01:
+        return 0.0
+    return q
 
 
 def _smoothed_velocity(t, truth, truth_step):
@@ -707,13 +805,17 @@ def _smooth_correction(truth, truth_step):
 def _make_ctx(t, truth, counts, step, truth_step, aux, grid, line_pitch, fit_idx=None):
     v, v_eps = _smoothed_velocity(t, truth, truth_step) if t.size > 1 else (np.zeros(t.size), 0.0)
     vs = np.where(np.abs(v) > v_eps, v, 0.0)
+    corr = _smooth_correction(truth, truth_step)
     priv = {
-        "_smooth_correction": _smooth_correction(truth, truth_step),
+        "_smooth_correction": corr,
+        "_smooth": truth + corr,
+        "_smooth_spline": interpolate.CubicSpline(t, truth + corr) if t.size >= 4 else None,
         "_step": step,
         "_truth_step": truth_step,
         "_truth_var": truth_step**2 / 12.0,
         "_counts": counts,
         "_theta_ref": float(np.mean(truth)) if truth.size else 0.0,
+        "_t_range": (float(t[0]), float(t[-1])) if t.size > 1 else (0.0, 1.0),
         "_line_pitch": line_pitch if line_pitch else 4.0 * step,
         "_motion_sign": fx.motion_sign(vs),
     }
@@ -965,7 +1067,7 @@ def select_effects(
 
     after = residual_stats(cur, full)
     alternatives = _alternatives(cur, chosen, chosen_trials, all_candidates, ctx, margin)
-    se = _intervals(cur, ctx)
+    se, cov = _intervals(cur, ctx, with_cov=True)
     lows = [b[0] for b in cur.model.bounds(ctx)]
     highs = [b[1] for b in cur.model.bounds(ctx)]
     fitted_effects = []
@@ -993,13 +1095,19 @@ def select_effects(
             not np.isfinite(se[j]) or (cur.x[j] - _Z90 * se[j] <= lows[j]
                                        and cur.x[j] + _Z90 * se[j] >= highs[j])
             for j in range(sl.start, sl.stop)))
-    explained = after["std"] <= after["floor_ci"][1]
+    for fe, (e, *_rest) in zip(fitted_effects, chosen):
+        fe.caveat = e.caveat(ctx)
+        fe.separated_by = e.separated_by
+    _merge_confounded(fitted_effects, [c[0] for c in chosen], cur, cov, ctx)
+    explained = after["std"] <= after["floor_limit"]
     message = _message(fitted_effects, explained, before, after)
     return SelectionResult(fitted_effects, before, after, bool(explained), message, steps,
                            float(cur.x[0]), float(10.0 ** cur.x[1]), cur, full)
 
 
 def _fmt(e: FittedEffect) -> str:
+    if e.merged_with:  # its separate values mean nothing on this motion: not printed
+        return f"{e.name} (merged with {', '.join(e.merged_with)})"
     main = ", ".join(f"{k} {v:.3g}" for k, v in e.params.items())
     return f"{e.name} ({main})"
 
@@ -1019,14 +1127,28 @@ def _message(effects, explained, before, after=None):
     (confounded parameters, alternatives the log cannot tell apart); "unexplained" when a
     significant residual remains."""
     if not effects:
-        if before["std"] <= before["floor_ci"][1]:
+        if before["std"] <= before.get("floor_limit", before["floor_ci"][1]):
             return "the residual matches the exact-model quantization floor; no effect is needed"
         return (f"unexplained: the residual std {before['std']:.3g} rad is {_ratio(before):.3g}x the "
                 "exact-model floor and no candidate effect explains it")
     names = " + ".join(_fmt(e) for e in effects)
-    confounded = [e.name for e in effects if e.derived.get("confounded")]
+    confounded = [e.name for e in effects if e.derived.get("confounded") and not e.merged_with]
     caveat = (f"; {', '.join(confounded)} not pinned down (interval spans its whole range: "
               "confounded with the other effects over this motion)") if confounded else ""
+    done = set()
+    for e in effects:
+        if e.merged_with and e.name not in done:
+            group = [e.name] + e.merged_with
+            done |= set(group)
+            by_name = {f.name: f for f in effects}
+            motions = list(dict.fromkeys(by_name[n].separated_by for n in group if by_name[n].separated_by))
+            caveat += (f"; {' and '.join(group)} cannot be separated over this motion: only their joint "
+                       f"shift of the angle ({e.derived['joint_peak_to_peak']:.3g} rad peak to peak) is "
+                       f"determined, their separate values are not physical values ({' or '.join(motions)} "
+                       "would separate them)")
+    for e in effects:
+        if e.caveat and not e.merged_with:
+            caveat += f"; {e.name}: {e.caveat}"
     for e in effects:
         alts = e.indistinguishable
         if alts:

@@ -61,7 +61,8 @@ def simulate_log(
     Supported names and parameters (SI): ``hysteresis {h}``, ``backlash {w}``,
     ``angle_harmonics {a1, b1, a2, b2}``, ``line_pitch_harmonics {a, b, pitch}``,
     ``quadrature_edges {e0, e1, e2}``, ``latency {tau}``, ``timestamp_jitter {sigma_t}``,
-    ``scale_mismatch {g}``, ``compliance {kappa}`` (needs ``torque``), ``missed_counts {times,
+    ``scale_mismatch {g}``, ``compliance {kappa}`` (needs ``torque``), ``slow_drift {rate, quad}``
+    (``rate (t - t_mid) + quad (t - t_mid)^2``, rad/s and rad/s^2), ``missed_counts {times,
     jumps}``, ``wrap_around {period}``.
 
     Returns
@@ -99,6 +100,10 @@ def simulate_log(
         p = effects["line_pitch_harmonics"]
         w = 2 * np.pi * te / p.get("pitch", 4 * step)
         te = te + p.get("a", 0) * np.cos(w) + p.get("b", 0) * np.sin(w)
+    if "slow_drift" in effects:
+        p = effects["slow_drift"]
+        tm = t - 0.5 * (t[0] + t[-1])
+        te = te + p.get("rate", 0.0) * tm + p.get("quad", 0.0) * tm**2
     counts = np.floor(te / step + c).astype(np.int64)
     if "quadrature_edges" in effects:
         p = effects["quadrature_edges"]
