@@ -42,10 +42,18 @@ TABLES = [
     ("challenge_residuals_summary.csv", "Residual stage: undeclared effects",
      "Identification, false names on clean logs, interval coverage and after/floor "
      "(`challenge_residuals.py`)."),
+    ("mrdlab_rig.csv", "Residual stage: the MRDLab rig, held out",
+     "Residual std (mrad; steady strokes / all samples) of the CUI channel on held-out runs, per "
+     "model, split and condition, against the targets and the independent study (`mrdlab_rig.py`)."),
+    ("mrdlab_rig_params.csv", "Residual stage: the MRDLab rig's shared parameters",
+     "Shared parameters per fold and their spread across folds (`mrdlab_rig.py`)."),
     ("exact_model_precision.csv", "Exact model: measured/predicted over pooled runs",
      "(`exact_model_precision.py`)."),
     ("design_check.csv", "Design mode: chosen designs against their budgets",
      "Simulated trajectories per budget, exact-model design and PQN-only design."),
+    ("design_search.csv", "Design mode: search cost",
+     "3 joints, 7^3 motion centres, the whole filter bank, 8 resolutions per joint "
+     "(`design_search.py`; target 60 s)."),
     ("corpus.csv", "Bad input", "The bad-input corpus through the workflow (`corpus_report.py`)."),
 ]
 
