@@ -42,12 +42,19 @@ def test_analyse_lrde_log_block_matches_design_contract():
     assert set(figures) == {"corner", "dwell_ppc", "bias_cycles"}
     assert all(isinstance(f, Figure) for f in figures.values())
     assert "stroke A12" in md and "Sampler diagnostics" in md
-    # The held-out motion-model comparison ran (a clean sinusoid: compare.py's own tests check
-    # which model wins) and fills DESIGN's residuals block.
-    motion = block["motion_model"]
-    assert [m["harmonics"] for m in motion["models"]] == [[], [3]]
+    # The held-out comparison of motion, encoder and clock effects ran (a clean sinusoid:
+    # compare.py's own tests check which model wins) and fills DESIGN's residuals block.
+    labels = [m["label"] for m in block["model"]["models"]]
+    assert labels[:2] == ["sinusoid", "harmonic3"]
+    assert set(labels) >= {"hysteresis", "drift", "count_jump", "time_jitter"}
     assert set(block["residuals"]) == {"metric", "before", "after", "effects"}
     assert "What the sinusoid misses" in md
+    # Before/after and a trust flag with its reason for every reported quantity.
+    assert block["before"]["model"] == "sinusoid"
+    assert block["after"]["model"] == block["model"]["chosen"]
+    for key in ("A12", "E_b", "a_eq", "f_hz", "offset_a", "bias_b"):
+        assert set(block["trust"][key]) == {"trusted", "reason"}
+        assert block["trust"][key]["trusted"] == (block["trust"][key]["reason"] is None)
     assert list(cycles.columns) == dwell.CYCLE_COLUMNS and len(cycles) >= 3
 
 
