@@ -151,3 +151,22 @@ def test_closed_loop_bias_stays_in_proposition_1_band():
     assert truth["E_b"].std() > 0.01 * STEP  # it wanders; it is not locked to the ideal bias
     cycles = dwell.cycle_table(settled["counts"].to_numpy(), t, STEP, f_hz=cl_p["f_hz"])
     assert set(cycles["steps_pp"]) == {4}
+
+
+def test_run_summary_names_untrusted_lrde_quantities():
+    from enclab import report as run_report
+
+    q = {"median": 5.18e-3, "q05": 5.15e-3, "q95": 5.21e-3}
+    reason = "no candidate model explains the readings"
+    block = {"A12": q, "E_b": q, "offset_a": None, "bias_b": None, "reason": "not identified",
+             "diagnostics": {"converged": True, "rhat_max": 1.002, "ess_min": 2456.0},
+             "model": {"chosen": "hysteresis"},
+             "trust": {"A12": {"trusted": False, "reason": reason},
+                       "E_b": {"trusted": False, "reason": reason},
+                       "offset_a": {"trusted": False, "reason": "not identified"}}}
+    rows = run_report._lrde([{"log_id": "l", "lrde": block}])["rows"]
+    assert rows[0]["untrusted"] == {"A12": reason, "E_b": reason}
+    text = run_report.summary_text(run_report.run_summary(
+        [{"log_id": "l", "warnings": [], "lrde": block}], ["l"], {}, ratios=None,
+        violations=None, written={}))
+    assert "model hysteresis" in text and f"l: UNTRUSTED A12, E_b: {reason}" in text
