@@ -304,14 +304,16 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
     ``min_z`` standard errors of the per-cycle differences, it predicts each fold better, and
     its full-log ``delta_bic = 2 (log L_model - log L_sine) - n_extra ln N`` is positive
     (``count_jump`` counts as one extra parameter besides its marginalised location); the
-    largest ``delta_bic`` wins. With ``pairs``, the winner plus each other passing term is
-    tried the same way against the winner. Models whose held-out gain lies within two standard
-    errors of the winner's are reported as not distinguishable from it.
+    largest ``delta_bic`` wins. With ``pairs``, the winner plus the runner-up (largest
+    ``delta_bic`` after it) is tried the same way against the winner. Models whose held-out
+    gain lies within two standard errors of the winner's are reported as not distinguishable
+    from it.
 
-    The chosen model is then checked: its held-out score against the distribution of the same
-    score on ``n_sim`` readings simulated from its own fit, per half; ``z = sum(observed -
-    mean) / sqrt(sum(var))``. ``z < trust_z`` means no candidate predicts the held-out readings
-    as well as its own simulations do: the estimates are flagged untrustworthy.
+    The chosen model is then checked (:func:`predictive_check`): its log-likelihood at the
+    full-log point fit against the distribution of the same score on ``n_sim`` readings
+    simulated from that fit. ``z < trust_z`` means even the best candidate explains the
+    readings worse than it explains its own simulations: the estimates are flagged
+    untrustworthy.
 
     Returns
     -------
@@ -392,7 +394,9 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
     best = max(winners, key=lambda m: m["delta_bic"]) if winners else models[0]
     if pairs and best is not models[0] and len(winners) > 1:
         base_res = results[best["label"]][1]
-        for other in winners:
+        # The winner plus the runner-up only: each pair costs two more point fits.
+        runner_up = max((m for m in winners if m is not best), key=lambda m: m["delta_bic"])
+        for other in (runner_up,):
             if other is best:
                 continue
             h = tuple(sorted(set(best["harmonics"]) | set(other["harmonics"])))

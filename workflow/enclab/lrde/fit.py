@@ -571,6 +571,10 @@ def _setup(t, counts, step, f_hz, sigma_range, sigma_prior, harmonics, effects,
         list(log_sigma_bounds),
     ] + [[-_HARMONIC_BOUND, _HARMONIC_BOUND]] * (2 * len(harmonics))
         + lrde_effects.effect_bounds(effects, duration, dt))
+    if "count_jump" in effects:
+        # The modal centre count may be the shorter segment's: E_b of the longer one's frame
+        # then lies a step further out.
+        bounds[1] = [-2.0, 2.0]
     log_sigma0 = np.log10(init["sigma"] / step)
     if not log_sigma_bounds[0] < log_sigma0 < log_sigma_bounds[1]:
         log_sigma0 = 0.5 * (log_sigma_bounds[0] + log_sigma_bounds[1])
@@ -813,9 +817,15 @@ def map_fit(t, counts, step, f_hz=None, harmonics=(), effects=(), start=None,
     starts = [setup["x0"].copy()]
     if start is not None:
         starts[0][:5] = np.asarray(start, dtype=float)[:5]
-        if setup["effects"] and "count_jump" in setup["effects"]:
-            # A jump wrecks the sinusoid's optimum: also start from the dwell baselines.
-            starts.append(setup["x0"].copy())
+    if "count_jump" in setup["effects"]:
+        # A jump wrecks the sinusoid's optimum over the whole log: also start from the
+        # sinusoid of the first and of the last third, one of which is free of the jump.
+        starts.append(setup["x0"].copy())
+        third = t.size // 3
+        for part in (slice(0, third), slice(t.size - third, t.size)):
+            seg = map_fit(t[part], counts[part], step, sigma_range=sigma_range,
+                          sigma_prior=sigma_prior, max_evals=max_evals, init=setup["init"])
+            starts.append(np.concatenate((seg["x"][:5], setup["x0"][5:])))
     duration = t[-1] - t[0]
 
     def objective(x):

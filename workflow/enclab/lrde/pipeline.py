@@ -15,7 +15,7 @@ With a truth channel (and ``settings["use_truth"]``, default True) the fit repor
 it uses that known motion centre; otherwise both are None with the reason.
 
 Settings keys (all optional): ``channel``, ``requantize``, ``use_truth``, ``rest_position``,
-``f_hz``, ``n_ensembles`` (4), ``n_walkers`` (32), ``n_steps`` (250), ``n_burn`` (250),
+``f_hz``, ``n_ensembles`` (4), ``n_walkers`` (16), ``n_steps`` (250), ``n_burn`` (100),
 ``ppc_draws`` (40), ``sigma_range_steps`` (prior range of the jitter in steps) and
 ``sigma_prior`` (``"uniform"`` or ``"log-uniform"``), see
 :func:`enclab.lrde.fit.fit_sinusoid`; ``motion_models`` (harmonic orders of the candidate
@@ -58,9 +58,9 @@ def _angle(df: pd.DataFrame, channel: dict) -> np.ndarray:
 
 def _sampler_settings(settings: dict) -> dict:
     return {"n_ensembles": int(settings.get("n_ensembles", 4)),
-            "n_walkers": int(settings.get("n_walkers", 32)),
+            "n_walkers": int(settings.get("n_walkers", 16)),
             "n_steps": int(settings.get("n_steps", 250)),
-            "n_burn": int(settings.get("n_burn", 250)),
+            "n_burn": int(settings.get("n_burn", 100)),
             "sigma_range": settings.get("sigma_range_steps"),
             "sigma_prior": settings.get("sigma_prior", "uniform")}
 
@@ -181,13 +181,17 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict):
     summary = dwell.dwell_summary(cycles)
     root = np.random.SeedSequence(seed)
     fit_seed, ppc_seed, compare_seed, after_seed = root.spawn(4)
+    # The comparison first: its point fit of the sinusoid starts the ensembles near the
+    # posterior, so that a short burn-in suffices.
+    model_block, comparison = _compare_effects(t, counts, step, compare_seed, settings)
     result = fit.fit_sinusoid(
         t, counts, step, fit_seed, f_hz=f_hz,
         truth=truth if settings.get("use_truth", True) else None,
-        rest_position=settings.get("rest_position"), **_sampler_settings(settings))
+        rest_position=settings.get("rest_position"),
+        start=None if comparison is None else comparison["full_fits"]["sinusoid"]["x"],
+        **_sampler_settings(settings))
     # The wall time goes to the log, not the block: summary.json must be byte-reproducible.
     _log.info("emcee fit: %.1f s wall, acceptance %.2f", result.wall_time_s, result.acceptance)
-    model_block, comparison = _compare_effects(t, counts, step, compare_seed, settings)
     before = result
     if comparison is not None:
         chosen_fit, jump = None, None
