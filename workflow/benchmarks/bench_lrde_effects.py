@@ -16,9 +16,10 @@ harmonic       3rd harmonic, amplitude 0.01 .. 0.1 step          harmonic3
 noise          position noise U(0.005, 0.1) step                 sinusoid
 =============  ================================================  ======================
 
-Per draw the stage's own steps run: the sinusoid's emcee fit (``before``), the effect
-comparison (:func:`enclab.lrde.compare.compare_effect_models`) and, when it chooses a model,
-that model's emcee fit (``after``). Recorded: the chosen model, whether it names the right
+Per draw the stage's own steps run: the effect comparison
+(:func:`enclab.lrde.compare.compare_effect_models`), the sinusoid's emcee fit (``before``) and,
+when the comparison chooses a model, that model's emcee fit (``after``), with the sampler
+settings of ``config.yaml`` (``--n-walkers`` etc.). Recorded: the chosen model, whether it names the right
 term, the predictive check, 90 % intervals of ``A12`` and ``E_b`` before and after (``E_b``
 relative to count 0 in the frame of the longer segment for a jump), convergence and wall time.
 
@@ -120,12 +121,14 @@ def one_draw(case, n_cycles, seed, sampler):
     started = time.perf_counter()
     row = {"case": case, "cycles": n_cycles, "seed": seed, "size": truth["size"],
            "A12_true": truth["A12"], "E_b_true": truth["E_b"]}
-    before = fit.fit_sinusoid(t, counts, STEP, fit_seed, **sampler)
     try:
         comp = compare.compare_effect_models(t, counts, STEP, compare_seed)
     except ValueError as err:
         row["failed"] = str(err)
         return row
+    # As the stage: the sinusoid's ensembles start at its point fit.
+    before = fit.fit_sinusoid(t, counts, STEP, fit_seed, start=comp["full_fits"]["sinusoid"]["x"],
+                              **sampler)
     after = before
     if comp["chosen"] != "sinusoid":
         point = comp["full_fits"][comp["chosen"]]

@@ -779,7 +779,7 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
 
 
 def map_fit(t, counts, step, f_hz=None, harmonics=(), effects=(), start=None,
-            sigma_range=None, sigma_prior="uniform", max_evals=1500, init=None) -> dict:
+            sigma_range=None, sigma_prior="uniform", max_evals=800, init=None) -> dict:
     """Maximum of the log-posterior of a model (Nelder-Mead, restarted once from its optimum).
 
     A cheap stand-in for :func:`fit_sinusoid` where only a point estimate is needed (the
@@ -820,7 +820,6 @@ def map_fit(t, counts, step, f_hz=None, harmonics=(), effects=(), start=None,
     if "count_jump" in setup["effects"]:
         # A jump wrecks the sinusoid's optimum over the whole log: also start from the
         # sinusoid of the first and of the last third, one of which is free of the jump.
-        starts.append(setup["x0"].copy())
         third = t.size // 3
         for part in (slice(0, third), slice(t.size - third, t.size)):
             seg = map_fit(t[part], counts[part], step, sigma_range=sigma_range,
@@ -856,7 +855,7 @@ def map_fit(t, counts, step, f_hz=None, harmonics=(), effects=(), start=None,
                                for i in range(y.size)])
         res = minimize(smoothed, y, method="Nelder-Mead",
                        options={"initial_simplex": sub, "maxfev": int(max_evals),
-                                "xatol": 1e-7, "fatol": 1e-3})
+                                "xatol": 1e-7, "fatol": 1e-2})
         x = np.insert(res.x, 4, x[4])
         for _ in range(2):
             simplex = np.vstack([x] + [np.clip(x + np.eye(x.size)[i] * simplex_step[i],
@@ -864,7 +863,7 @@ def map_fit(t, counts, step, f_hz=None, harmonics=(), effects=(), start=None,
                                        for i in range(x.size)])
             res = minimize(objective, x, method="Nelder-Mead",
                            options={"initial_simplex": simplex, "maxfev": int(max_evals),
-                                    "xatol": 1e-7, "fatol": 1e-3})
+                                    "xatol": 1e-7, "fatol": 1e-2})
             x = res.x
         if best is None or res.fun < best.fun:
             best = res
