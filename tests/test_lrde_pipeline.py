@@ -2,6 +2,7 @@
 import json
 
 import numpy as np
+import pandas as pd
 import pytest
 from matplotlib.figure import Figure
 
@@ -170,3 +171,33 @@ def test_run_summary_names_untrusted_lrde_quantities():
         [{"log_id": "l", "warnings": [], "lrde": block}], ["l"], {}, ratios=None,
         violations=None, written={}))
     assert "model hysteresis" in text and f"l: UNTRUSTED A12, E_b: {reason}" in text
+
+
+def test_hysteresis_with_a_truth_channel_is_named_and_a_b_hold_after():
+    """A dead band of 1/8 step read beside a fine truth channel: the comparison names the
+    hysteresis, and with it in the model the offset a and bias b intervals hold the truth."""
+    from enclab.lrde import effects
+
+    rng = np.random.default_rng(31)
+    f_hz, a, b, A12, phase = 20.3, 0.3 * STEP, 0.22 * STEP, 3.7 * STEP, 0.4
+    t = np.arange(int(40 * 2000.0 / f_hz)) / 2000.0
+    counts = effects.simulate_counts(rng, t, STEP, A12, a + b, f_hz, phase,
+                                     noise_std=0.005 * STEP, hysteresis=STEP / 8)
+    theta = b + 0.5 * A12 * np.sin(2 * np.pi * f_hz * t + phase)
+    df = pd.DataFrame({"t": t, "coarse": counts,
+                       "fine": np.floor(theta / (STEP / 100) + 0.5).astype(np.int64)})
+    meta = {"log_id": "sim_hysteresis", "channels": [
+        {"name": "fine", "role": "truth", "joint": 1, "unit": "rad", "storage": "counts",
+         "step": STEP / 100},
+        {"name": "coarse", "role": "measured", "joint": 1, "unit": "rad", "storage": "counts",
+         "step": STEP}]}
+    settings = dict(FAST, motion_models=[[], [3]], effects=["hysteresis", "drift"],
+                    n_steps=150, n_burn=60)
+    block, _, md, _ = pipeline.analyse_lrde_log(df, meta, seed=3, settings=settings)
+    assert block["model"]["chosen"] == "hysteresis"
+    w = block["model"]["params"]["hysteresis"]
+    assert w["q05"] < STEP / 8 < w["q95"]
+    for key, true in (("offset_a", a), ("bias_b", b), ("A12", A12)):
+        assert block["after"][key]["q05"] < true < block["after"][key]["q95"], key
+    assert block["before"]["model"] == "sinusoid" and block["after"]["model"] == "hysteresis"
+    assert "before (sinusoid)" in md and "after (hysteresis)" in md

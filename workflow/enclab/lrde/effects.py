@@ -143,7 +143,7 @@ def _log_interval(lo, hi):
 
 
 def pointwise_log_likelihood(params, t, counts, step, centre_count, t_ref, harmonics=(),
-                             effects=(), offset=0) -> np.ndarray:
+                             effects=(), offset=0, time_blur=0.0) -> np.ndarray:
     """``log p(count_j | previous count, theta)`` per parameter row and sample.
 
     Parameters
@@ -159,6 +159,9 @@ def pointwise_log_likelihood(params, t, counts, step, centre_count, t_ref, harmo
         Model terms; ``count_jump`` is ignored here (see :func:`log_likelihood`).
     offset : int
         Count offset subtracted from ``counts`` (and the previous counts) before reading.
+    time_blur : float
+        Extra timing uncertainty in s, added like ``time_jitter`` (prediction of held-out
+        readings from a point fit, see :func:`enclab.lrde.compare.compare_effect_models`).
 
     Returns
     -------
@@ -172,10 +175,12 @@ def pointwise_log_likelihood(params, t, counts, step, centre_count, t_ref, harmo
     motion, speed = _motion_and_speed(p, t, t_ref, harmonics, cols.get("drift"))
     z = centre_count + 0.5 + p[:, 1:2] + motion
     s = 10.0 ** p[:, 4:5]
-    if "time_jitter" in cols:
-        dt = np.median(np.diff(t)) if t.size > 1 else 1.0
-        sig_t = p[:, cols["time_jitter"]:cols["time_jitter"] + 1] * dt
-        s = np.sqrt(s * s + (speed * sig_t) ** 2)
+    if "time_jitter" in cols or time_blur > 0:
+        sig_t2 = time_blur ** 2
+        if "time_jitter" in cols:
+            dt = np.median(np.diff(t)) if t.size > 1 else 1.0
+            sig_t2 = sig_t2 + (p[:, cols["time_jitter"]:cols["time_jitter"] + 1] * dt) ** 2
+        s = np.sqrt(s * s + speed * speed * sig_t2)
     lo = np.broadcast_to(k, z.shape).copy()
     hi = lo + 1.0
     if "hysteresis" in cols:

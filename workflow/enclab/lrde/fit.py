@@ -874,5 +874,5 @@ def map_fit(t, counts, step, f_hz=None, harmonics=(), effects=(), start=None,
             "centre": setup["centre"], "t_ref": setup["t_ref"], "step": step,
             "harmonics": setup["harmonics"], "effects": setup["effects"],
             "extra_scale": setup["extra_scale"], "bounds": bounds,
-            "steps_pp": setup["init"]["steps_pp"],
+            "steps_pp": setup["init"]["steps_pp"], "dt": float(np.median(np.diff(t))),
             "init": {k: v for k, v in setup["init"].items() if k != "cycles"}}
