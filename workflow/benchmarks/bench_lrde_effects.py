@@ -35,7 +35,7 @@ Usage::
         --cycles 20 100
     python workflow/benchmarks/bench_lrde_effects.py --draws 10 --clean-draws 20 --cycles 20
 
-Writes ``<out>/lrde_effects_draws.csv`` and ``<out>/lrde_effects.csv``.
+Writes ``<out>/lrde_effects_draws.csv`` and ``<out>/lrde_effects_summary.csv``.
 """
 from __future__ import annotations
 
@@ -224,7 +224,17 @@ def main(argv=None):
     ap.add_argument("--time-budget", type=float, default=None,
                     help="stop drawing after this many seconds (rows so far are kept)")
     ap.add_argument("--out", default=str(ROOT / "results" / "benchmarks"))
+    ap.add_argument("--from-draws", default=None, metavar="CSV",
+                    help="only summarise an existing lrde_effects_draws.csv")
     args = ap.parse_args(argv)
+    if args.from_draws:
+        out = pathlib.Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        summary = stamp(summarise(pd.read_csv(args.from_draws)))
+        summary.to_csv(out / "lrde_effects_summary.csv", index=False)
+        with pd.option_context("display.width", 250, "display.max_columns", 40):
+            print(summary)
+        return
     sampler = {"n_ensembles": args.n_ensembles, "n_walkers": args.n_walkers,
                "n_steps": args.n_steps, "n_burn": args.n_burn}
     out = pathlib.Path(args.out)
@@ -252,7 +262,7 @@ def main(argv=None):
     draws = stamp(pd.DataFrame(rows))
     draws.to_csv(out / "lrde_effects_draws.csv", index=False)
     summary = stamp(summarise(draws))
-    summary.to_csv(out / "lrde_effects.csv", index=False)
+    summary.to_csv(out / "lrde_effects_summary.csv", index=False)
     with pd.option_context("display.width", 250, "display.max_columns", 40):
         print(summary)
 
