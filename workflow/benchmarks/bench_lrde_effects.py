@@ -47,7 +47,6 @@ import time
 import numpy as np
 import pandas as pd
 from scipy.optimize import minimize
-from scipy.stats import norm
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 from provenance import ROOT, stamp  # noqa: E402

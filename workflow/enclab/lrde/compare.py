@@ -304,7 +304,8 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
     the plug-in log predictive density per held-out cycle. Interleaved folds make the
     prediction an interpolation: a frequency, drift or jump estimated on one fold applies to
     the other without extrapolating over half the log (a point estimate extrapolated over
-    half the log misplaces the sharp reading edges and its score depends on luck). A candidate replaces the sinusoid when its summed gain exceeds
+    half the log misplaces the sharp reading edges and its score depends on luck). A
+    candidate replaces the sinusoid when its summed gain exceeds
     ``min_z`` standard errors of the per-cycle differences, it predicts each fold better, and
     its full-log ``delta_bic = 2 (log L_model - log L_sine) - n_extra ln N`` is positive
     (``count_jump`` counts as one extra parameter besides its marginalised location); the

@@ -171,7 +171,8 @@ def effect_model_block(comparison: dict | None, chosen_fit=None, reason: str | N
     ``effects``, ``signature`` (per chosen effect), ``params`` (the chosen fit's effect and
     harmonic parameters, ``{median, q05, q95}`` in SI units: hysteresis rad, drift 1/s,
     time_jitter s, ``c<k>``/``s<k>`` rad; plus ``drift_over_log`` (relative frequency change
-    over ``duration_s``) and ``jump`` as given: ``{index, time_s, delta, probability}``), ``indistinguishable`` and ``note``, ``delta_bic``, ``models``
+    over ``duration_s``) and ``jump`` as given: ``{index, time_s, delta, probability}``),
+    ``indistinguishable`` and ``note``, ``delta_bic``, ``models``
     (held-out scores per candidate), ``check`` (the calibrated predictive check), ``rule``.
     """
     from enclab.lrde import effects as lrde_effects
