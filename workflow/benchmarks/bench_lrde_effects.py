@@ -223,13 +223,17 @@ def main(argv=None):
     ap.add_argument("--time-budget", type=float, default=None,
                     help="stop drawing after this many seconds (rows so far are kept)")
     ap.add_argument("--out", default=str(ROOT / "results" / "benchmarks"))
-    ap.add_argument("--from-draws", default=None, metavar="CSV",
-                    help="only summarise an existing lrde_effects_draws.csv")
+    ap.add_argument("--from-draws", default=None, metavar="CSV", nargs="+",
+                    help="only summarise existing lrde_effects_draws.csv files (concatenated)")
+    ap.add_argument("--first-draw", type=int, default=0,
+                    help="index of the first draw per case (continue an earlier run)")
     args = ap.parse_args(argv)
     if args.from_draws:
         out = pathlib.Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
-        summary = stamp(summarise(pd.read_csv(args.from_draws)))
+        draws = pd.concat([pd.read_csv(p) for p in args.from_draws], ignore_index=True)
+        draws.to_csv(out / "lrde_effects_draws.csv", index=False)
+        summary = stamp(summarise(draws))
         summary.to_csv(out / "lrde_effects_summary.csv", index=False)
         with pd.option_context("display.width", 250, "display.max_columns", 40):
             print(summary)
@@ -242,7 +246,7 @@ def main(argv=None):
     tasks = []
     for cycles in args.cycles:
         n_max = max(args.draws, args.clean_draws)
-        for i in range(n_max):
+        for i in range(args.first_draw, n_max):
             for c_i, case in enumerate(args.cases):
                 n_case = args.clean_draws if case == "clean" else args.draws
                 if i < n_case:
