@@ -89,3 +89,43 @@ def test_report_warns_when_even_the_best_model_predicts_poorly():
     models[0]["elpd_per_sample"] = -0.03
     text = "\n".join(report._motion_model_lines(motion))
     assert "poorly" not in text and "the paper's model stands" in text
+
+
+def _effect_log(seed, n_cycles=12, **kw):
+    from enclab.lrde import effects
+
+    t = np.arange(int(n_cycles * 2000.0 / 20.3)) / 2000.0
+    c = effects.simulate_counts(np.random.default_rng(seed), t, STEP, 3.7 * STEP, 0.55 * STEP,
+                                20.3, 0.4, noise_std=0.005 * STEP, **kw)
+    return t, c
+
+
+EFFECT_CANDIDATES = [((), ()), ((), ("hysteresis",)), ((), ("drift",))]
+
+
+def test_effect_comparison_names_hysteresis_and_keeps_the_sinusoid_on_a_clean_log():
+    t, c = _effect_log(11)
+    out = compare.compare_effect_models(t, c, STEP, 1, candidates=EFFECT_CANDIDATES,
+                                        pairs=False)
+    assert out["chosen"] == "sinusoid" and out["check"]["trusted"]
+    t, c = _effect_log(11, hysteresis=STEP / 6)
+    out = compare.compare_effect_models(t, c, STEP, 1, candidates=EFFECT_CANDIDATES,
+                                        pairs=False)
+    assert out["chosen"] == "hysteresis" and out["check"]["trusted"]
+    # The point fit recovers the dead band (1/6 step) to a few hundredths of a step.
+    w = out["full_fits"]["hysteresis"]["x"][5]
+    assert abs(w - 1 / 6) < 0.03
+
+
+def test_predictive_check_flags_a_log_no_candidate_explains():
+    # A missed count mid-log, with no jump term among the candidates: every model reads a
+    # whole step wrong on part of the log, which its own simulations never do.
+    t, c = _effect_log(11, jump=(600, -1))
+    out = compare.compare_effect_models(t, c, STEP, 1, candidates=EFFECT_CANDIDATES,
+                                        pairs=False)
+    assert not out["check"]["trusted"] and out["check"]["z"] < -4
+    # With the jump term it is named and the check passes.
+    out = compare.compare_effect_models(t, c, STEP, 1,
+                                        candidates=EFFECT_CANDIDATES + [((), ("count_jump",))],
+                                        pairs=False)
+    assert out["chosen"] == "count_jump" and out["check"]["trusted"]

@@ -2,6 +2,7 @@
 import json
 
 import numpy as np
+import pandas as pd
 import pytest
 from matplotlib.figure import Figure
 
@@ -42,12 +43,19 @@ def test_analyse_lrde_log_block_matches_design_contract():
     assert set(figures) == {"corner", "dwell_ppc", "bias_cycles"}
     assert all(isinstance(f, Figure) for f in figures.values())
     assert "stroke A12" in md and "Sampler diagnostics" in md
-    # The held-out motion-model comparison ran (a clean sinusoid: compare.py's own tests check
-    # which model wins) and fills DESIGN's residuals block.
-    motion = block["motion_model"]
-    assert [m["harmonics"] for m in motion["models"]] == [[], [3]]
+    # The held-out comparison of motion, encoder and clock effects ran (a clean sinusoid:
+    # compare.py's own tests check which model wins) and fills DESIGN's residuals block.
+    labels = [m["label"] for m in block["model"]["models"]]
+    assert labels[:2] == ["sinusoid", "harmonic3"]
+    assert set(labels) >= {"hysteresis", "drift", "count_jump", "time_jitter"}
     assert set(block["residuals"]) == {"metric", "before", "after", "effects"}
     assert "What the sinusoid misses" in md
+    # Before/after and a trust flag with its reason for every reported quantity.
+    assert block["before"]["model"] == "sinusoid"
+    assert block["after"]["model"] == block["model"]["chosen"]
+    for key in ("A12", "E_b", "a_eq", "f_hz", "offset_a", "bias_b"):
+        assert set(block["trust"][key]) == {"trusted", "reason"}
+        assert block["trust"][key]["trusted"] == (block["trust"][key]["reason"] is None)
     assert list(cycles.columns) == dwell.CYCLE_COLUMNS and len(cycles) >= 3
 
 
@@ -144,3 +152,52 @@ def test_closed_loop_bias_stays_in_proposition_1_band():
     assert truth["E_b"].std() > 0.01 * STEP  # it wanders; it is not locked to the ideal bias
     cycles = dwell.cycle_table(settled["counts"].to_numpy(), t, STEP, f_hz=cl_p["f_hz"])
     assert set(cycles["steps_pp"]) == {4}
+
+
+def test_run_summary_names_untrusted_lrde_quantities():
+    from enclab import report as run_report
+
+    q = {"median": 5.18e-3, "q05": 5.15e-3, "q95": 5.21e-3}
+    reason = "no candidate model explains the readings"
+    block = {"A12": q, "E_b": q, "offset_a": None, "bias_b": None, "reason": "not identified",
+             "diagnostics": {"converged": True, "rhat_max": 1.002, "ess_min": 2456.0},
+             "model": {"chosen": "hysteresis"},
+             "trust": {"A12": {"trusted": False, "reason": reason},
+                       "E_b": {"trusted": False, "reason": reason},
+                       "offset_a": {"trusted": False, "reason": "not identified"}}}
+    rows = run_report._lrde([{"log_id": "l", "lrde": block}])["rows"]
+    assert rows[0]["untrusted"] == {"A12": reason, "E_b": reason}
+    text = run_report.summary_text(run_report.run_summary(
+        [{"log_id": "l", "warnings": [], "lrde": block}], ["l"], {}, ratios=None,
+        violations=None, written={}))
+    assert "model hysteresis" in text and f"l: UNTRUSTED A12, E_b: {reason}" in text
+
+
+def test_hysteresis_with_a_truth_channel_is_named_and_a_b_hold_after():
+    """A dead band of 1/8 step read beside a fine truth channel: the comparison names the
+    hysteresis, and with it in the model the offset a and bias b intervals hold the truth."""
+    from enclab.lrde import effects
+
+    rng = np.random.default_rng(31)
+    f_hz, a, b, A12, phase = 20.3, 0.3 * STEP, 0.22 * STEP, 3.7 * STEP, 0.4
+    t = np.arange(int(40 * 2000.0 / f_hz)) / 2000.0
+    counts = effects.simulate_counts(rng, t, STEP, A12, a + b, f_hz, phase,
+                                     noise_std=0.005 * STEP, hysteresis=STEP / 8)
+    theta = b + 0.5 * A12 * np.sin(2 * np.pi * f_hz * t + phase)
+    df = pd.DataFrame({"t": t, "coarse": counts,
+                       "fine": np.floor(theta / (STEP / 100) + 0.5).astype(np.int64)})
+    meta = {"log_id": "sim_hysteresis", "channels": [
+        {"name": "fine", "role": "truth", "joint": 1, "unit": "rad", "storage": "counts",
+         "step": STEP / 100},
+        {"name": "coarse", "role": "measured", "joint": 1, "unit": "rad", "storage": "counts",
+         "step": STEP}]}
+    settings = dict(FAST, motion_models=[[], [3]], effects=["hysteresis", "drift"],
+                    n_steps=150, n_burn=60)
+    block, _, md, _ = pipeline.analyse_lrde_log(df, meta, seed=3, settings=settings)
+    assert block["model"]["chosen"] == "hysteresis"
+    w = block["model"]["params"]["hysteresis"]
+    assert w["q05"] < STEP / 8 < w["q95"]
+    for key, true in (("offset_a", a), ("bias_b", b), ("A12", A12)):
+        assert block["after"][key]["q05"] < true < block["after"][key]["q95"], key
+    assert block["before"]["model"] == "sinusoid" and block["after"]["model"] == "hysteresis"
+    assert "before (sinusoid)" in md and "after (hysteresis)" in md

@@ -34,7 +34,7 @@ TABLES = [
     ("lrde_summary.csv", "Low-resolution encoder: accuracy and calibration",
      "Posterior and baseline estimators of paper 002 over simulated draws (`bench_lrde.py`)."),
     ("lrde_effects_summary.csv", "Low-resolution encoder: effects named and intervals kept",
-     "Encoder, clock and motion effects on simulated logs (`bench_lrde.py`)."),
+     "Encoder, clock and motion effects on simulated logs (`bench_lrde_effects.py`)."),
     ("lrde_oracle_summary.csv", "Low-resolution encoder: the information bound",
      "The best RMSE any estimator could reach on the same draws (`lrde_oracle_bound.py`)."),
     ("lrde_throughput_summary.csv", "Low-resolution encoder: MCMC cost",

@@ -81,7 +81,10 @@ def _lrde(summaries: Sequence[Mapping]) -> dict | None:
         diag = block.get("diagnostics") or {}
         row = {"log_id": s["log_id"], "converged": diag.get("converged"),
                "rhat_max": _num(diag.get("rhat_max")), "ess_min": _num(diag.get("ess_min")),
-               "reason": block.get("reason")}
+               "reason": block.get("reason"),
+               "model": (block.get("model") or {}).get("chosen"),
+               "untrusted": {k: v.get("reason") for k, v in (block.get("trust") or {}).items()
+                             if not v.get("trusted") and block.get(k) is not None}}
         for key in _LRDE_QUANTITIES:
             q = block.get(key)
             row[key] = None if q is None else {k: _num(q.get(k)) for k in ("median", "q05", "q95")}
@@ -210,7 +213,12 @@ def _headlines(run: Mapping) -> list[tuple[str, list[str]]]:
                 if q3 and q3.get("median") is not None:
                     parts.append(f"{key} {_angle(q3['median'])} [{_angle(q3['q05'])}, {_angle(q3['q95'])}]")
             state = "converged" if r.get("converged") else "NOT converged"
-            lines.append(f"{r['log_id']}: " + ", ".join(parts) + f" (90 %; {state})")
+            model = f"; model {r['model']}" if r.get("model") else ""
+            lines.append(f"{r['log_id']}: " + ", ".join(parts) + f" (90 %; {state}{model})")
+            untrusted = r.get("untrusted") or {}
+            if untrusted:
+                lines.append(f"{r['log_id']}: UNTRUSTED {', '.join(sorted(untrusted))}: "
+                             f"{next(iter(untrusted.values()))}")
         out.append((f"low-resolution encoder ({_count(lrde['logs'], 'log')})", lines))
     res = run["analyses"].get("residuals")
     if res:

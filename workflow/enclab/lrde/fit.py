@@ -59,6 +59,7 @@ import numpy as np
 from scipy.special import log_ndtr
 
 from enclab.lrde import diagnostics, dwell, model
+from enclab.lrde import effects as lrde_effects
 
 __all__ = ["PARAM_NAMES", "FitResult", "log_likelihood", "log_probability", "initial_guess",
            "fit_sinusoid"]
@@ -67,9 +68,11 @@ PARAM_NAMES = ("A12", "E_b", "f_hz", "phase", "sigma")
 _HARMONIC_BOUND = 0.5  # |c_k|, |s_k| < step / 2: distortion well below the stroke
 
 
-def param_names(harmonics=()) -> tuple:
-    """Names of the sampled parameters: :data:`PARAM_NAMES` then ``c_k, s_k`` per harmonic."""
-    return PARAM_NAMES + tuple(f"{x}{k}" for k in harmonics for x in ("c", "s"))
+def param_names(harmonics=(), effects=()) -> tuple:
+    """Names of the sampled parameters: :data:`PARAM_NAMES`, ``c_k, s_k`` per harmonic, then
+    the effect parameters (:func:`enclab.lrde.effects.effect_param_names`)."""
+    return (PARAM_NAMES + tuple(f"{x}{k}" for k in harmonics for x in ("c", "s"))
+            + lrde_effects.effect_param_names(effects))
 
 
 def _check_harmonics(harmonics) -> tuple:
@@ -191,7 +194,8 @@ def _motion_steps(p, t, t_ref, grid, harmonics):
     return motion
 
 
-def log_likelihood(params, t, counts, step, centre_count, t_ref, grid=None, harmonics=()):
+def log_likelihood(params, t, counts, step, centre_count, t_ref, grid=None, harmonics=(),
+                   effects=()):
     """Log-likelihood of the counts for parameter rows in internal units.
 
     Parameters
@@ -214,11 +218,17 @@ def log_likelihood(params, t, counts, step, centre_count, t_ref, grid=None, harm
         Orders ``k >= 2`` of harmonic distortion of the motion; each adds the columns
         ``c_k / step, s_k / step`` (after the five above) of ``c_k cos(k phi) + s_k sin(k phi)``
         with ``phi`` the fundamental's phase.
+    effects : tuple of str
+        Encoder and clock effects (:mod:`enclab.lrde.effects`); their parameters follow the
+        harmonics' columns. With effects the general (slower) likelihood of that module is used.
 
     Returns
     -------
     numpy.ndarray, shape (n_walkers,) (or float for a single row)
     """
+    if effects:
+        return lrde_effects.log_likelihood(params, t, counts, step, centre_count, t_ref,
+                                           harmonics, effects)
     p = np.atleast_2d(params)
     eb, log_s = p[:, 1:2], p[:, 4:5]
     inv_s = 10.0 ** -log_s
@@ -253,7 +263,7 @@ def _log_interval_prob_scaled(lower, inv_s):
 
 
 def log_probability(params, t, counts, step, centre_count, t_ref, bounds, grid=None,
-                    sigma_prior="log-uniform", harmonics=()):
+                    sigma_prior="log-uniform", harmonics=(), effects=()):
     """Log-posterior (uniform priors on ``bounds``, rows outside get ``-inf``); vectorised.
 
     ``sigma_prior`` is the prior of the jitter inside its bounds: ``"log-uniform"`` (flat in
@@ -271,7 +281,7 @@ def log_probability(params, t, counts, step, centre_count, t_ref, bounds, grid=N
         per_slice = max(1, _CACHE_ENTRIES // max(np.size(t), 1))
         out[inside] = np.concatenate([
             log_likelihood(rows[i:i + per_slice], t, counts, step, centre_count, t_ref, grid,
-                           harmonics) for i in range(0, rows.shape[0], per_slice)])
+                           harmonics, effects) for i in range(0, rows.shape[0], per_slice)])
         if sigma_prior == "uniform":
             out[inside] += np.log(10.0) * p[inside, 4]
         elif sigma_prior != "log-uniform":
@@ -381,11 +391,38 @@ class FitResult:
         """Orders of the harmonic-distortion terms of the motion model (empty: a pure sine)."""
         return tuple(self.settings.get("harmonics", ()))
 
+    @property
+    def effects(self) -> tuple:
+        """Encoder and clock effects of the reading model (:mod:`enclab.lrde.effects`)."""
+        return tuple(self.settings.get("effects", ()))
+
+    def to_internal(self, si) -> np.ndarray:
+        """SI sample rows in the internal units of :func:`log_likelihood`."""
+        return _to_internal(np.asarray(si, dtype=float), self.step,
+                            self.settings.get("extra_scale"))
+
     def motion(self, t, row) -> np.ndarray:
         """Motion about the bias, ``theta(t) - b``, in rad, for one SI sample row."""
         t = np.asarray(t, dtype=float)
-        internal = _to_internal(np.asarray(row, dtype=float)[None, :], self.step)
+        internal = self.to_internal(np.asarray(row, dtype=float)[None, :])
+        if "drift" in self.effects:
+            motion, _ = lrde_effects._motion_and_speed(
+                internal, t, self.t_ref, self.harmonics,
+                lrde_effects._columns(self.harmonics, self.effects)["drift"])
+            return self.step * motion[0]
         return self.step * _motion_steps(internal, t, self.t_ref, None, self.harmonics)[0]
+
+    def simulate_counts(self, t, row, rng) -> np.ndarray:
+        """Readings of the fitted model at one SI sample row (motion, noise and the reading
+        effects; a marginalised count jump is not drawn)."""
+        names = list(self.param_names)
+        kw = {"A12": row[0], "a_eq": (self.centre_count + 0.5) * self.step + row[1],
+              "f_hz": row[2], "phase": row[3], "t_ref": self.t_ref, "noise_std": row[4],
+              "harmonics": {k: (row[names.index(f"c{k}")], row[names.index(f"s{k}")])
+                            for k in self.harmonics}}
+        for name in lrde_effects.effect_param_names(self.effects):
+            kw[name] = row[names.index(name)]
+        return lrde_effects.simulate_counts(rng, t, self.step, **kw)
 
     @property
     def medians(self) -> dict:
@@ -414,21 +451,23 @@ def _quantiles(x) -> dict:
     return {"median": float(q50), "q05": float(q05), "q95": float(q95)}
 
 
-def _to_si(internal, step):
+def _to_si(internal, step, extra_scale=None):
+    """Internal rows to SI; the columns after the fifth scale by ``extra_scale`` (default
+    ``step``: harmonic coefficients)."""
     out = internal.copy()
     out[..., 0] *= step
     out[..., 1] *= step
     out[..., 4] = step * 10.0 ** internal[..., 4]
-    out[..., 5:] *= step
+    out[..., 5:] *= step if extra_scale is None else np.asarray(extra_scale, dtype=float)
     return out
 
 
-def _to_internal(si, step):
+def _to_internal(si, step, extra_scale=None):
     out = np.array(si, dtype=float, copy=True)
     out[..., 0] /= step
     out[..., 1] /= step
     out[..., 4] = np.log10(si[..., 4] / step)
-    out[..., 5:] /= step
+    out[..., 5:] /= step if extra_scale is None else np.asarray(extra_scale, dtype=float)
     return out
 
 
@@ -502,6 +541,62 @@ class _EnsemblesMove(emcee.moves.RedBlueMove):
         return state, accepted
 
 
+def _setup(t, counts, step, f_hz, sigma_range, sigma_prior, harmonics, effects,
+           init=None) -> dict:
+    """Names, prior bounds, starting point, start dispersion and likelihood arguments."""
+    if sigma_range is None:
+        log_sigma_bounds = _LOG_SIGMA_BOUNDS
+    else:
+        lo, hi = (float(v) for v in sigma_range)
+        if not (0 < lo < hi <= 10.0 ** _LOG_SIGMA_BOUNDS[1]):
+            raise ValueError(f"sigma_range must be (lo, hi) steps with 0 < lo < hi <= "
+                             f"{10.0 ** _LOG_SIGMA_BOUNDS[1]:.3f} (jitter beyond a third of a step "
+                             f"hides the readings' pattern), got {sigma_range!r}")
+        log_sigma_bounds = (np.log10(lo), np.log10(hi))
+    if sigma_prior not in ("uniform", "log-uniform"):
+        raise ValueError(f"sigma_prior must be 'uniform' or 'log-uniform', got {sigma_prior!r}")
+    harmonics = _check_harmonics(harmonics)
+    effects = lrde_effects.check_effects(effects)
+    names = param_names(harmonics, effects)
+    if init is None:
+        init = initial_guess(t, counts, step, f_hz=f_hz)
+    K = init["steps_pp"]
+    duration = t[-1] - t[0]
+    dt = float(np.median(np.diff(t)))
+    bounds = np.array([
+        [K - 1.0, K + 1.0],
+        [-1.0, 1.0],
+        [0.8 * init["f_hz"], 1.25 * init["f_hz"]],
+        [init["phase"] - np.pi, init["phase"] + np.pi],
+        list(log_sigma_bounds),
+    ] + [[-_HARMONIC_BOUND, _HARMONIC_BOUND]] * (2 * len(harmonics))
+        + lrde_effects.effect_bounds(effects, duration, dt))
+    if "count_jump" in effects:
+        # The modal centre count may be the shorter segment's: E_b of the longer one's frame
+        # then lies a step further out.
+        bounds[1] = [-2.0, 2.0]
+    log_sigma0 = np.log10(init["sigma"] / step)
+    if not log_sigma_bounds[0] < log_sigma0 < log_sigma_bounds[1]:
+        log_sigma0 = 0.5 * (log_sigma_bounds[0] + log_sigma_bounds[1])
+    effect_names = lrde_effects.effect_param_names(effects)
+    effect_x0 = {"hysteresis": 0.02, "drift": 0.0, "time_jitter": 0.05}
+    effect_scale = {"hysteresis": 0.01, "drift": 0.002 / duration, "time_jitter": 0.02}
+    x0 = np.array([init["A12"] / step, init["E_b"] / step, init["f_hz"], init["phase"],
+                   log_sigma0] + [0.0] * (2 * len(harmonics))
+                  + [effect_x0[n] for n in effect_names])
+    # Dispersion of the start: a few tenths of the expected posterior widths, so that
+    # independent ensembles start apart and R-hat can detect non-mixing.
+    scale = np.array([0.005, 0.003, 0.002 / duration, 0.005, 0.05]
+                     + [0.003] * (2 * len(harmonics)) + [effect_scale[n] for n in effect_names])
+    extra_scale = [step] * (2 * len(harmonics)) + lrde_effects.effect_scales(effects, step, dt)
+    kwargs = {"t": t, "counts": counts, "step": step, "centre_count": init["centre_count"],
+              "t_ref": init["t_ref"], "bounds": bounds, "grid": uniform_grid(t),
+              "sigma_prior": sigma_prior, "harmonics": harmonics, "effects": effects}
+    return {"harmonics": harmonics, "effects": effects, "names": names, "bounds": bounds,
+            "init": init, "x0": x0, "scale": scale, "kwargs": kwargs, "extra_scale": extra_scale,
+            "centre": init["centre_count"], "t_ref": init["t_ref"]}
+
+
 def _check_int_counts(counts, n):
     c = np.asarray(counts)
     if c.ndim != 1 or c.size != n or not np.issubdtype(c.dtype, np.integer):
@@ -512,7 +607,8 @@ def _check_int_counts(counts, n):
 
 def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250, n_burn=150,
                  f_hz=None, truth=None, rest_position=None, sigma_range=None,
-                 sigma_prior="uniform", moves="de", harmonics=()) -> FitResult:
+                 sigma_prior="uniform", moves="de", harmonics=(), effects=(),
+                 start=None) -> FitResult:
     """Posterior of stroke, bias deviation, frequency, phase and noise from coarse counts.
 
     Parameters
@@ -550,6 +646,13 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
         ``c_k cos(k phi) + s_k sin(k phi)`` (rad, uniform prior on ``+-step/2``), reported as
         ``c<k>``, ``s<k>``. ``A12`` is then twice the fundamental's amplitude. See
         :func:`compare_motion_models` for choosing them on held-out data.
+    effects : tuple of str
+        Encoder and clock effects of the reading model (:mod:`enclab.lrde.effects`), reported
+        under their parameter names in SI units (``hysteresis`` rad, ``drift`` 1/s,
+        ``time_jitter`` s; ``count_jump`` is marginalised and has no column).
+    start : array_like, optional
+        Internal parameter row to start the ensembles around (e.g. :func:`map_fit`'s optimum);
+        default the dwell baselines of :func:`initial_guess`.
     moves : {"de", "stretch"}
         emcee moves. Differential evolution mixes about twice as fast as the stretch move on
         this posterior.
@@ -582,44 +685,15 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
     else:
         root = np.random.SeedSequence(seed)
     started = time.perf_counter()
-    if sigma_range is None:
-        log_sigma_bounds = _LOG_SIGMA_BOUNDS
-    else:
-        lo, hi = (float(v) for v in sigma_range)
-        if not (0 < lo < hi <= 10.0 ** _LOG_SIGMA_BOUNDS[1]):
-            raise ValueError(f"sigma_range must be (lo, hi) steps with 0 < lo < hi <= "
-                             f"{10.0 ** _LOG_SIGMA_BOUNDS[1]:.3f} (jitter beyond a third of a step "
-                             f"hides the readings' pattern), got {sigma_range!r}")
-        log_sigma_bounds = (np.log10(lo), np.log10(hi))
-    harmonics = _check_harmonics(harmonics)
-    names = param_names(harmonics)
+    setup = _setup(t, counts, step, f_hz, sigma_range, sigma_prior, harmonics, effects)
+    harmonics, effects = setup["harmonics"], setup["effects"]
+    names, bounds, init, kwargs = setup["names"], setup["bounds"], setup["init"], setup["kwargs"]
     ndim = len(names)
-    init = initial_guess(t, counts, step, f_hz=f_hz)
-    K = init["steps_pp"]
-    bounds = np.array([
-        [K - 1.0, K + 1.0],
-        [-1.0, 1.0],
-        [0.8 * init["f_hz"], 1.25 * init["f_hz"]],
-        [init["phase"] - np.pi, init["phase"] + np.pi],
-        list(log_sigma_bounds),
-    ] + [[-_HARMONIC_BOUND, _HARMONIC_BOUND]] * (2 * len(harmonics)))
-    centre = init["centre_count"]
-    t_ref = init["t_ref"]
-    log_sigma0 = np.log10(init["sigma"] / step)
-    if not log_sigma_bounds[0] < log_sigma0 < log_sigma_bounds[1]:
-        log_sigma0 = 0.5 * (log_sigma_bounds[0] + log_sigma_bounds[1])
-    x0 = np.array([init["A12"] / step, init["E_b"] / step, init["f_hz"], init["phase"],
-                   log_sigma0] + [0.0] * (2 * len(harmonics)))
-    # Dispersion of the start: a few tenths of the expected posterior widths, so that
-    # independent ensembles start apart and R-hat can detect non-mixing.
-    duration = t[-1] - t[0]
-    scale = np.array([0.005, 0.003, 0.002 / duration, 0.005, 0.05]
-                     + [0.003] * (2 * len(harmonics)))
-    if sigma_prior not in ("uniform", "log-uniform"):
-        raise ValueError(f"sigma_prior must be 'uniform' or 'log-uniform', got {sigma_prior!r}")
-    kwargs = {"t": t, "counts": counts, "step": step, "centre_count": centre, "t_ref": t_ref,
-              "bounds": bounds, "grid": uniform_grid(t), "sigma_prior": sigma_prior,
-              "harmonics": harmonics}
+    K, centre, t_ref = init["steps_pp"], setup["centre"], setup["t_ref"]
+    x0, scale = setup["x0"], setup["scale"]
+    if start is not None:
+        x0 = np.clip(np.asarray(start, dtype=float), bounds[:, 0] + 1e-6 * np.ptp(bounds, axis=1),
+                     bounds[:, 1] - 1e-6 * np.ptp(bounds, axis=1))
     # Every ensemble starts and moves from a child seed of its own (SeedSequence.spawn), all
     # side by side in one sampler (_EnsemblesMove): independent chains, one likelihood call.
     starts, randoms = [], []
@@ -641,7 +715,7 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
     chain = sampler.get_chain(discard=n_burn)  # (n_steps, n_ens * n_walkers, ndim)
     internal = chain.reshape(n_steps, n_ensembles, n_walkers, ndim).transpose(1, 0, 2, 3)
     acceptance = sampler.acceptance_fraction
-    si = _to_si(internal, step)
+    si = _to_si(internal, step, setup["extra_scale"])
     samples = si.reshape(-1, ndim)
     tau, rhat, ess = {}, {}, {}
     for i, name in enumerate(names):
@@ -699,5 +773,106 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
         acceptance=float(np.mean(acceptance)), wall_time_s=time.perf_counter() - started,
         settings={"n_ensembles": n_ensembles, "n_walkers": n_walkers, "n_steps": n_steps,
                   "n_burn": n_burn, "bounds_internal": bounds.tolist(),
-                  "harmonics": list(harmonics), "sigma_prior": sigma_prior},
+                  "harmonics": list(harmonics), "effects": list(effects),
+                  "extra_scale": list(setup["extra_scale"]), "sigma_prior": sigma_prior},
     )
+
+
+def map_fit(t, counts, step, f_hz=None, harmonics=(), effects=(), start=None,
+            sigma_range=None, sigma_prior="uniform", max_evals=800, init=None) -> dict:
+    """Maximum of the log-posterior of a model (Nelder-Mead, restarted once from its optimum).
+
+    A cheap stand-in for :func:`fit_sinusoid` where only a point estimate is needed (the
+    held-out comparison of models): a few hundred likelihood evaluations instead of tens of
+    thousands.
+
+    Parameters
+    ----------
+    t, counts, step, f_hz, harmonics, effects, sigma_range, sigma_prior :
+        As :func:`fit_sinusoid`.
+    start : array_like, optional
+        Internal row of the paper's sinusoid (first five columns; e.g. another model's
+        optimum) to start from; the extra columns start at their defaults.
+    max_evals : int
+        Likelihood evaluations per Nelder-Mead run.
+    init : dict, optional
+        Another point fit's ``init`` (:func:`initial_guess` of the whole log): its centre
+        count, time origin and prior bounds are reused, so that fits to subsets of the log
+        (e.g. every other cycle) share one frame.
+
+    Returns
+    -------
+    dict
+        ``x`` (internal row), ``log_post``, ``log_lik``, ``names``, ``centre``, ``t_ref``,
+        ``step``, ``harmonics``, ``effects``, ``extra_scale``, ``bounds``, ``steps_pp``.
+    """
+    from scipy.optimize import minimize
+
+    t = np.asarray(t, dtype=float)
+    counts = _check_int_counts(counts, t.size)
+    step = model._check_step(step)
+    setup = _setup(t, counts, step, f_hz, sigma_range, sigma_prior, harmonics, effects, init)
+    bounds, kwargs = setup["bounds"], setup["kwargs"]
+    margin = 1e-6 * np.ptp(bounds, axis=1)
+    starts = [setup["x0"].copy()]
+    if start is not None:
+        starts[0][:5] = np.asarray(start, dtype=float)[:5]
+    if "count_jump" in setup["effects"]:
+        # A jump wrecks the sinusoid's optimum over the whole log: also start from the
+        # sinusoid of the first and of the last third, one of which is free of the jump.
+        third = t.size // 3
+        for part in (slice(0, third), slice(t.size - third, t.size)):
+            seg = map_fit(t[part], counts[part], step, sigma_range=sigma_range,
+                          sigma_prior=sigma_prior, max_evals=max_evals, init=setup["init"])
+            starts.append(np.concatenate((seg["x"][:5], setup["x0"][5:])))
+    duration = t[-1] - t[0]
+
+    def objective(x):
+        value = log_probability(x[None, :], **kwargs)[0]
+        return -value if np.isfinite(value) else 1e300
+
+    simplex_step = np.array([0.02, 0.02, 0.01 / duration, 0.02, 0.2]
+                            + [0.02] * (2 * len(setup["harmonics"]))
+                            + [{"hysteresis": 0.05, "drift": 0.01 / duration,
+                                "time_jitter": 0.1}[n]
+                               for n in lrde_effects.effect_param_names(setup["effects"])])
+    # A first run with the jitter held at 0.05 step or more: a smoothed likelihood whose
+    # optimum is not hidden behind the cliffs of the nearly hard-edged one.
+    smooth = max(np.log10(0.05), bounds[4, 0] + margin[4])
+    free = np.arange(len(setup["names"])) != 4
+
+    def smoothed(y):
+        x = np.insert(y, 4, smooth)
+        return objective(x)
+
+    best = None
+    for x in starts:
+        x = np.clip(x, bounds[:, 0] + margin, bounds[:, 1] - margin)
+        y = x[free]
+        sub = np.vstack([y] + [np.clip(y + np.eye(y.size)[i] * simplex_step[free][i],
+                                       bounds[free, 0] + margin[free],
+                                       bounds[free, 1] - margin[free])
+                               for i in range(y.size)])
+        res = minimize(smoothed, y, method="Nelder-Mead",
+                       options={"initial_simplex": sub, "maxfev": int(max_evals),
+                                "xatol": 1e-7, "fatol": 1e-2})
+        x = np.insert(res.x, 4, x[4])
+        for _ in range(2):
+            simplex = np.vstack([x] + [np.clip(x + np.eye(x.size)[i] * simplex_step[i],
+                                               bounds[:, 0] + margin, bounds[:, 1] - margin)
+                                       for i in range(x.size)])
+            res = minimize(objective, x, method="Nelder-Mead",
+                           options={"initial_simplex": simplex, "maxfev": int(max_evals),
+                                    "xatol": 1e-7, "fatol": 1e-2})
+            x = res.x
+        if best is None or res.fun < best.fun:
+            best = res
+    res, x = best, best.x
+    log_lik = float(log_likelihood(x[None, :], t, counts, step, setup["centre"], setup["t_ref"],
+                                   None, setup["harmonics"], setup["effects"])[0])
+    return {"x": x, "log_post": -float(res.fun), "log_lik": log_lik, "names": setup["names"],
+            "centre": setup["centre"], "t_ref": setup["t_ref"], "step": step,
+            "harmonics": setup["harmonics"], "effects": setup["effects"],
+            "extra_scale": setup["extra_scale"], "bounds": bounds,
+            "steps_pp": setup["init"]["steps_pp"], "dt": float(np.median(np.diff(t))),
+            "init": {k: v for k, v in setup["init"].items() if k != "cycles"}}

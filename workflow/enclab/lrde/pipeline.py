@@ -15,12 +15,20 @@ With a truth channel (and ``settings["use_truth"]``, default True) the fit repor
 it uses that known motion centre; otherwise both are None with the reason.
 
 Settings keys (all optional): ``channel``, ``requantize``, ``use_truth``, ``rest_position``,
-``f_hz``, ``n_ensembles`` (4), ``n_walkers`` (32), ``n_steps`` (250), ``n_burn`` (250),
+``f_hz``, ``n_ensembles`` (4), ``n_walkers`` (16), ``n_steps`` (250), ``n_burn`` (100),
 ``ppc_draws`` (40), ``sigma_range_steps`` (prior range of the jitter in steps) and
 ``sigma_prior`` (``"uniform"`` or ``"log-uniform"``), see
 :func:`enclab.lrde.fit.fit_sinusoid`; ``motion_models`` (harmonic orders of the candidate
 motion models compared on held-out halves, default ``[[], [2], [3]]``; ``[]`` turns the
-comparison off), see :func:`enclab.lrde.compare.compare_motion_models`.
+comparison off) and ``effects`` (encoder and clock effects compared with them, default
+all of :data:`enclab.lrde.effects.EFFECTS`), ``effect_pairs`` (also try the winner plus each
+other passing term, default True), ``trust_z`` (threshold of the predictive check, default -4),
+see :func:`enclab.lrde.compare.compare_effect_models`.
+
+The paper's sinusoid is fitted first (``before``); when the comparison chooses a model with
+an added term, that model is fitted the same way and its posterior gives the reported
+``A12``, ``E_b``, ``a_eq``, ``offset_a``, ``bias_b`` (``after``); ``trust`` says per quantity
+whether it can be relied on and why not.
 """
 from __future__ import annotations
 
@@ -30,6 +38,7 @@ import numpy as np
 import pandas as pd
 
 from enclab.lrde import compare, dwell, fit, plots, report
+from enclab.lrde import effects as lrde_effects
 
 __all__ = ["select_channels", "analyse_lrde_log"]
 
@@ -37,7 +46,7 @@ _log = logging.getLogger(__name__)
 
 _KNOWN_SETTINGS = {"channel", "requantize", "use_truth", "rest_position", "f_hz", "n_ensembles",
                    "n_walkers", "n_steps", "n_burn", "ppc_draws", "sigma_range_steps",
-                   "sigma_prior", "motion_models"}
+                   "sigma_prior", "motion_models", "effects", "effect_pairs", "trust_z"}
 
 
 def _angle(df: pd.DataFrame, channel: dict) -> np.ndarray:
@@ -49,27 +58,32 @@ def _angle(df: pd.DataFrame, channel: dict) -> np.ndarray:
 
 def _sampler_settings(settings: dict) -> dict:
     return {"n_ensembles": int(settings.get("n_ensembles", 4)),
-            "n_walkers": int(settings.get("n_walkers", 32)),
+            "n_walkers": int(settings.get("n_walkers", 16)),
             "n_steps": int(settings.get("n_steps", 250)),
-            "n_burn": int(settings.get("n_burn", 250)),
+            "n_burn": int(settings.get("n_burn", 100)),
             "sigma_range": settings.get("sigma_range_steps"),
             "sigma_prior": settings.get("sigma_prior", "uniform")}
 
 
-def _compare_models(t, counts, step, seed, settings, sine_fit) -> dict:
-    candidates = [tuple(c) for c in settings.get("motion_models", [[], [2], [3]])]
+def _compare_effects(t, counts, step, seed, settings) -> tuple:
+    """The effect comparison's block and the comparison itself (None when not run)."""
+    harmonics = [tuple(c) for c in settings.get("motion_models", [[], [2], [3]])]
+    names = lrde_effects.check_effects(settings.get("effects", lrde_effects.EFFECTS))
+    candidates = [((), ())] + [(h, ()) for h in harmonics if h] + [((), (e,)) for e in names]
     if len(candidates) < 2:
-        return report.motion_model_block(None, "motion_models lists fewer than two models")
-    if candidates[0] != ():
-        candidates = [()] + [c for c in candidates if c != ()]
+        return report.effect_model_block(None, reason="no candidate besides the sinusoid "
+                                                      "(motion_models and effects empty)"), None
     try:
-        comparison = compare.compare_motion_models(
+        comparison = compare.compare_effect_models(
             t, counts, step, seed, candidates=candidates, f_hz=settings.get("f_hz"),
-            sine_fit=sine_fit, **_sampler_settings(settings))
+            pairs=bool(settings.get("effect_pairs", True)),
+            trust_z=float(settings.get("trust_z", -4.0)),
+            sigma_range=settings.get("sigma_range_steps"),
+            sigma_prior=settings.get("sigma_prior", "uniform"))
     except ValueError as err:
-        _log.warning("motion models not compared: %s", err)
-        return report.motion_model_block(None, str(err))
-    return report.motion_model_block(comparison)
+        _log.warning("effects not compared: %s", err)
+        return report.effect_model_block(None, reason=str(err)), None
+    return None, comparison
 
 
 def select_channels(df: pd.DataFrame, meta: dict, settings: dict):
@@ -166,17 +180,51 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict):
     cycles = dwell.cycle_table(counts, t, step, f_hz=f_hz)
     summary = dwell.dwell_summary(cycles)
     root = np.random.SeedSequence(seed)
-    fit_seed, ppc_seed, compare_seed = root.spawn(3)
+    fit_seed, ppc_seed, compare_seed, after_seed = root.spawn(4)
+    # The comparison first: its point fit of the sinusoid starts the ensembles near the
+    # posterior, so that a short burn-in suffices.
+    model_block, comparison = _compare_effects(t, counts, step, compare_seed, settings)
     result = fit.fit_sinusoid(
         t, counts, step, fit_seed, f_hz=f_hz,
         truth=truth if settings.get("use_truth", True) else None,
-        rest_position=settings.get("rest_position"), **_sampler_settings(settings))
+        rest_position=settings.get("rest_position"),
+        start=None if comparison is None else comparison["full_fits"]["sinusoid"]["x"],
+        **_sampler_settings(settings))
     # The wall time goes to the log, not the block: summary.json must be byte-reproducible.
     _log.info("emcee fit: %.1f s wall, acceptance %.2f", result.wall_time_s, result.acceptance)
+    before = result
+    if comparison is not None:
+        chosen_fit, jump = None, None
+        if comparison["chosen"] != "sinusoid":
+            point = comparison["full_fits"][comparison["chosen"]]
+            chosen_fit = fit.fit_sinusoid(
+                t, counts, step, after_seed, f_hz=f_hz,
+                truth=truth if settings.get("use_truth", True) else None,
+                rest_position=settings.get("rest_position"),
+                harmonics=tuple(comparison["chosen_harmonics"]),
+                effects=tuple(comparison["chosen_effects"]), start=point["x"],
+                **_sampler_settings(settings))
+            _log.info("emcee fit of %s: %.1f s wall", comparison["chosen"],
+                      chosen_fit.wall_time_s)
+            if "count_jump" in comparison["chosen_effects"]:
+                index, delta, mass, _ = lrde_effects.jump_posterior(
+                    point["x"], t, counts, step, point["centre"], point["t_ref"],
+                    point["harmonics"], point["effects"])
+                jump = {"index": index, "time_s": float(t[index]), "delta": delta,
+                        "probability_within_1_sample": mass,
+                        "frame": "a_eq refers to the longer segment; the shorter one reads "
+                                 f"{delta:+d} count"}
+        model_block = report.effect_model_block(comparison, chosen_fit,
+                                                duration_s=float(t[-1] - t[0]), jump=jump)
+        if chosen_fit is not None:
+            result = chosen_fit
     block = report.summary_block(result, summary)
     block["channels"] = info
-    block["motion_model"] = _compare_models(t, counts, step, compare_seed, settings, result)
-    residuals = report.residuals_block(block["motion_model"])
+    block["model"] = model_block
+    block["before"] = report.estimates_block(before)
+    block["after"] = report.estimates_block(result)
+    block["trust"] = report.trust_block(result, model_block)
+    residuals = report.effect_residuals_block(model_block)
     if residuals is not None:
         block["residuals"] = residuals
     predictive = plots.posterior_predictive_dwell(result, t, ppc_seed,

@@ -34,9 +34,13 @@ def corner_plot(fit, truths: dict | None = None) -> Figure:
         True values (SI) by parameter name, drawn as lines (simulated data).
     """
     extra = fit.param_names[5:]
-    scale = np.array([_DEG, _DEG, 1.0, 1.0, _DEG] + [_DEG] * len(extra))
+    effect_axes = {"hysteresis": (_DEG, "hysteresis w [deg]"), "drift": (1.0, "drift [1/s]"),
+                   "time_jitter": (1e6, "time jitter [us]")}
+    scale = np.array([_DEG, _DEG, 1.0, 1.0, _DEG]
+                     + [effect_axes.get(name, (_DEG, ""))[0] for name in extra])
     labels = [r"$A_{12}$ [deg]", r"$E_b$ [deg]", r"$f$ [Hz]", r"phase [rad]",
-              r"$\sigma$ [deg]"] + [f"${name[0]}_{{{name[1:]}}}$ [deg]" for name in extra]
+              r"$\sigma$ [deg]"] + [effect_axes[name][1] if name in effect_axes
+                                    else f"${name[0]}_{{{name[1:]}}}$ [deg]" for name in extra]
     data = fit.samples * scale
     truth_values = None
     if truths is not None:
@@ -69,8 +73,11 @@ def posterior_predictive_dwell(fit, t, seed, n_draws=40) -> pd.DataFrame:
         row = fit.samples[i]
         E_b, f_hz, sigma = row[1], row[2], row[4]
         a_eq = (fit.centre_count + 0.5) * fit.step + E_b
-        theta = fit.motion(t, row) + rng.normal(0.0, sigma, t.size)
-        counts = model.encoder_counts(theta, fit.step, a_eq)
+        if fit.effects:
+            counts = fit.simulate_counts(t, row, rng)
+        else:
+            theta = fit.motion(t, row) + rng.normal(0.0, sigma, t.size)
+            counts = model.encoder_counts(theta, fit.step, a_eq)
         table = dwell.cycle_table(counts, t, fit.step, f_hz=float(f_hz))
         frames.append(pd.DataFrame({"draw": d, "cycle": table["cycle"], "w1": table["w1"],
                                     "w2": table["w2"], "steps_pp": table["steps_pp"]}))

@@ -12,7 +12,8 @@ import math
 import numpy as np
 
 __all__ = ["summary_block", "motion_model_block", "residuals_block", "report_markdown",
-           "batch_rows"]
+           "batch_rows", "effect_model_block", "estimates_block", "trust_block",
+           "effect_residuals_block"]
 
 _NOT_CONVERGED = "NOT converged (R-hat > 1.01 or ESS < 1000)"
 
@@ -148,6 +149,115 @@ def residuals_block(motion: dict) -> dict | None:
             "effects": effects}
 
 
+_ESTIMATES = ("A12", "E_b", "a_eq", "f_hz", "offset_a", "bias_b")
+
+
+def estimates_block(fit) -> dict:
+    """``A12, E_b, a_eq, f_hz, offset_a, bias_b`` of one fit (triples or None) and its model."""
+    s = fit.summary
+    out = {k: _triple(s.get(k)) for k in _ESTIMATES}
+    out["model"] = "+".join([f"harmonic{k}" for k in fit.harmonics] + list(fit.effects)) \
+        or "sinusoid"
+    out["converged"] = bool(fit.converged)
+    return out
+
+
+def effect_model_block(comparison: dict | None, chosen_fit=None, reason: str | None = None,
+                       duration_s: float | None = None, jump: dict | None = None) -> dict:
+    """The ``model`` entry of the ``lrde`` block from
+    :func:`enclab.lrde.compare.compare_effect_models` (or why it was not run).
+
+    Keys: ``chosen`` (label, ``"sinusoid"`` when no term is added), ``harmonics``,
+    ``effects``, ``signature`` (per chosen effect), ``params`` (the chosen fit's effect and
+    harmonic parameters, ``{median, q05, q95}`` in SI units: hysteresis rad, drift 1/s,
+    time_jitter s, ``c<k>``/``s<k>`` rad; plus ``drift_over_log`` (relative frequency change
+    over ``duration_s``) and ``jump`` as given: ``{index, time_s, delta, probability}``),
+    ``indistinguishable`` and ``note``, ``delta_bic``, ``models``
+    (held-out scores per candidate), ``check`` (the calibrated predictive check), ``rule``.
+    """
+    from enclab.lrde import effects as lrde_effects
+
+    if comparison is None:
+        return {"chosen": "sinusoid", "harmonics": [], "effects": [], "models": [],
+                "reason": reason}
+    out = {"chosen": comparison["chosen"], "harmonics": comparison["chosen_harmonics"],
+           "effects": comparison["chosen_effects"],
+           "signature": {e: lrde_effects.effect_signature(e)
+                         for e in comparison["chosen_effects"]},
+           "indistinguishable": list(comparison["indistinguishable"]),
+           "delta_bic": _num(comparison["delta_bic"]),
+           "models": [{k: (_num(v) if isinstance(v, float) else v) for k, v in m.items()}
+                      for m in comparison["models"]],
+           "check": {k: (_num(v) if isinstance(v, float) else v)
+                     for k, v in comparison["check"].items()},
+           "rule": comparison["rule"], "n_cycles": comparison["n_cycles"]}
+    out["note"] = (None if not out["indistinguishable"] else
+                   f"{out['chosen']} is not distinguishable from "
+                   f"{', '.join(out['indistinguishable'])} on held-out cycles (within two "
+                   "standard errors); the estimates are those of the chosen model")
+    params = {}
+    if chosen_fit is not None:
+        extra = list(chosen_fit.param_names[5:])
+        for name in extra:
+            params[name] = _triple(chosen_fit.summary[name])
+        if "drift" in extra and duration_s:
+            params["drift_over_log"] = {k: _num(v * duration_s)
+                                        for k, v in chosen_fit.summary["drift"].items()}
+    if jump is not None:
+        params["jump"] = jump
+    out["params"] = params
+    return out
+
+
+def trust_block(fit, model_block: dict) -> dict:
+    """Per reported quantity ``{trusted, reason}``.
+
+    A quantity is untrusted when the chosen model fails the predictive check (its readings
+    are explained worse than its own simulations are), when its sampler did not converge, or
+    (``offset_a``, ``bias_b``) when it is not identified at all.
+    """
+    reasons = []
+    check = model_block.get("check") or {}
+    if check and not check.get("trusted", True):
+        reasons.append(f"no candidate model explains the readings: the chosen model "
+                       f"({model_block.get('chosen')}) scores {check['z']:.1f} standard "
+                       "deviations below its own simulated readings")
+    if not fit.converged:
+        reasons.append("the sampler did not converge (R-hat > 1.01 or ESS < 1000)")
+    out = {}
+    for key in _ESTIMATES:
+        r = list(reasons)
+        if fit.summary.get(key) is None:
+            r = ["not identified (readings give only a_eq = a + b)"]
+        out[key] = {"trusted": not r, "reason": "; ".join(r) if r else None}
+    return out
+
+
+def effect_residuals_block(model_block: dict) -> dict | None:
+    """DESIGN's ``residuals`` block for a low-resolution log from its effect comparison."""
+    models = model_block.get("models") or []
+    if not models:
+        return None
+    chosen = next(m for m in models if m["label"] == model_block["chosen"])
+    effects = []
+    if model_block["chosen"] != "sinusoid":
+        params = model_block.get("params") or {}
+        for name in list(model_block["effects"]) + [f"harmonic{k}"
+                                                     for k in model_block["harmonics"]]:
+            keys = ([name] if name in params else
+                    [f"c{name[8:]}", f"s{name[8:]}"] if name.startswith("harmonic") else [])
+            effects.append({
+                "name": name if not name.startswith("harmonic") else "harmonic_distortion",
+                "params": {k: params[k]["median"] for k in keys if params.get(k)},
+                "ci": {k: [params[k]["q05"], params[k]["q95"]] for k in keys if params.get(k)},
+                "delta_bic": model_block.get("delta_bic"),
+                "delta_elpd": chosen["delta_elpd"], "delta_elpd_se": chosen["delta_se"]})
+    return {"metric": "held-out log predictive density per cycle (nats, higher is better; "
+                      "point fits, even/odd cycles as folds)",
+            "before": models[0]["elpd_per_cycle"], "after": chosen["elpd_per_cycle"],
+            "effects": effects}
+
+
 def _quantile_triple(x):
     q05, q50, q95 = np.quantile(x, [0.05, 0.5, 0.95])
     return {"median": float(q50), "q05": float(q05), "q95": float(q95)}
@@ -194,7 +304,54 @@ def report_markdown(block: dict, log_id: str | None = None) -> str:
               f"{diag['ess_min']:.0f}, max tau {diag['tau_max']:.1f} steps -> "
               f"{'converged' if diag['converged'] else _NOT_CONVERGED}."]
     lines += _motion_model_lines(block.get("motion_model"))
+    lines += _effect_lines(block)
     return "\n".join(lines) + "\n"
+
+
+def _effect_lines(block: dict) -> list[str]:
+    m = block.get("model")
+    if not m:
+        return []
+    lines = ["", "## What the sinusoid misses: encoder, clock and motion effects", ""]
+    if not m.get("models"):
+        return lines + [f"Not compared: {m.get('reason')}."]
+    lines += ["| model | held-out score per cycle [nats] | gain over the sinusoid | z | "
+              "delta BIC |", "|---|---|---|---|---|"]
+    for r in m["models"]:
+        gain = "-" if r["label"] == "sinusoid" else f"{r['delta_elpd']:.1f} +- {r['delta_se']:.1f}"
+        z = f"{r['z']:.1f}" if r.get("z") is not None else "-"
+        bic = f"{r['delta_bic']:.1f}" if r.get("delta_bic") is not None else "-"
+        lines.append(f"| {r['label']} | {r['elpd_per_cycle']:.3f} | {gain} | {z} | {bic} |")
+    lines += ["", f"Rule: {m['rule']}.", ""]
+    if m["chosen"] == "sinusoid":
+        lines.append("Result: no effect predicts the held-out readings better than the "
+                     "sinusoid; the paper's model stands.")
+    else:
+        sig = "; ".join(f"{k}: {v}" for k, v in (m.get("signature") or {}).items())
+        lines.append(f"Result: **{m['chosen']}**" + (f" ({sig})" if sig else "") + ".")
+        for name, q in (m.get("params") or {}).items():
+            if isinstance(q, dict) and "median" in q:
+                lines.append(f"- {name}: {q['median']:.4g} (90 %: {q['q05']:.4g} .. "
+                             f"{q['q95']:.4g}) SI units")
+        if m.get("note"):
+            lines.append(f"Note: {m['note']}.")
+    before, after = block.get("before"), block.get("after")
+    if before and after and m["chosen"] != "sinusoid":
+        lines += ["", f"| quantity | before (sinusoid) | after ({after['model']}) |",
+                  "|---|---|---|"]
+        for key, label in (("A12", "stroke A12"), ("E_b", "E_b"), ("a_eq", "a_eq"),
+                           ("offset_a", "offset a"), ("bias_b", "bias b")):
+            lines.append(f"| {label} | {_fmt_deg(before.get(key))} | {_fmt_deg(after.get(key))} |")
+    check = m.get("check") or {}
+    if check:
+        lines += ["", f"Predictive check: the chosen model's log-likelihood is "
+                  f"{check['z']:.1f} standard deviations from that of its own simulated readings "
+                  f"-> {'passed' if check['trusted'] else 'FAILED: estimates untrusted'}."]
+    untrusted = {k: v["reason"] for k, v in (block.get("trust") or {}).items()
+                 if not v["trusted"] and block.get(k) is not None}
+    for k, reason in untrusted.items():
+        lines.append(f"- {k} untrusted: {reason}.")
+    return lines
 
 
 # Held-out log predictive density per sample below which the report calls the fit poor: the
@@ -269,5 +426,7 @@ def batch_rows(log_id: str, block: dict) -> list[dict]:
             "dwell_formula_A12": block["dwell_formula_A12"] if quantity == "A12" else None,
             "reason": block["reason"] if quantity in ("offset_a", "bias_b") and not triple
             else None,
+            "trusted": ((block.get("trust") or {}).get(quantity) or {}).get("trusted"),
+            "model": (block.get("model") or {}).get("chosen"),
         })
     return rows

@@ -1,0 +1,274 @@
+"""Benchmark of the LRDE effect comparison: is the right effect named, do the intervals hold?
+
+Each draw is a benchmark log of ``bench_lrde.py`` (step 0.09 deg, ``a ~ U(0, step)``,
+``A12 ~ U(3, 5) step``, ``E_b`` in Proposition 1's band, f ~ 20 Hz x U(0.9, 1.1) at 2 kHz,
+position noise 0.005 step, random phase) read through
+:func:`enclab.lrde.effects.simulate_counts` with one effect of a random size:
+
+=============  ================================================  ======================
+case           size (log-uniform unless said)                    right name
+=============  ================================================  ======================
+clean          -                                                 sinusoid
+hysteresis     dead band 1/50 .. 1/5 step                        hysteresis
+drift          frequency change 0.5 .. 3 % over the log (+-)     drift
+count_jump     one missed count at U(0.25, 0.75) of the log      count_jump
+harmonic       3rd harmonic, amplitude 0.01 .. 0.1 step          harmonic3
+noise          position noise U(0.005, 0.1) step                 sinusoid
+=============  ================================================  ======================
+
+Per draw the stage's own steps run: the effect comparison
+(:func:`enclab.lrde.compare.compare_effect_models`), the sinusoid's emcee fit (``before``) and,
+when the comparison chooses a model, that model's emcee fit (``after``), with the sampler
+settings of ``config.yaml`` (``--n-walkers`` etc.). Recorded: the chosen model, whether it names the right
+term, the predictive check, 90 % intervals of ``A12`` and ``E_b`` before and after (``E_b``
+relative to count 0 in the frame of the longer segment for a jump), convergence and wall time.
+
+Summary per (cycles, case): ``n``; named rate with a Wilson 95 % interval; the detection
+threshold (the size at which a logistic fit of named vs log size crosses 50 %) and the named
+rate among draws of at least 3x that size; coverage of the 90 % intervals before and after;
+the rate of converged, trusted intervals that miss the truth by more than their own width; the
+median wall time.
+
+Usage::
+
+    python workflow/benchmarks/bench_lrde_effects.py --draws 100 --clean-draws 200 \\
+        --cycles 20 100
+    python workflow/benchmarks/bench_lrde_effects.py --draws 10 --clean-draws 20 --cycles 20
+
+Writes ``<out>/lrde_effects_draws.csv`` and ``<out>/lrde_effects_summary.csv``.
+"""
+from __future__ import annotations
+
+import argparse
+import pathlib
+import sys
+import time
+
+import numpy as np
+import pandas as pd
+from scipy.optimize import minimize
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from provenance import ROOT, stamp  # noqa: E402
+
+from enclab.lrde import compare, effects, fit, model, simulate  # noqa: E402
+
+STEP = simulate.ROS_DRILL_STEP
+CASES = ("clean", "hysteresis", "drift", "count_jump", "harmonic", "noise")
+RIGHT = {"clean": None, "hysteresis": "hysteresis", "drift": "drift",
+         "count_jump": "count_jump", "harmonic": "harmonic3", "noise": None}
+
+
+def _log_uniform(rng, lo, hi):
+    return float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
+
+
+def simulate_case(rng, case, n_cycles, fs_hz=2000.0, f_nominal=20.0, noise_frac=0.005):
+    """``(t, counts, truth)``: one benchmark log with the effect of ``case`` at a random size.
+
+    ``truth`` holds ``A12``, ``E_b`` (count-0 frame of the reference segment), ``size`` (the
+    effect's size in the unit of the table above: step fraction, relative drift, step) and
+    the simulator arguments.
+    """
+    f_hz = f_nominal * rng.uniform(0.9, 1.1)
+    a_frac = rng.uniform(0, 1)
+    A12 = rng.uniform(3.0, 5.0) * STEP
+    half_eps = 0.5 * float(model.epsilon(A12, STEP))
+    E_b = rng.uniform(-half_eps, half_eps)
+    a_eq = 0.5 * STEP + E_b
+    phase = rng.uniform(-np.pi, np.pi)
+    t = np.arange(int(np.floor((n_cycles + 1) * fs_hz / f_hz))) / fs_hz
+    kw = {"noise_std": noise_frac * STEP}
+    size = 0.0
+    e_b_ref = E_b
+    if case == "hysteresis":
+        size = _log_uniform(rng, 1 / 50, 1 / 5)
+        kw["hysteresis"] = size * STEP
+    elif case == "drift":
+        size = _log_uniform(rng, 0.005, 0.03)
+        kw["drift"] = rng.choice([-1.0, 1.0]) * size / t[-1]
+    elif case == "count_jump":
+        index = int(rng.uniform(0.25, 0.75) * t.size)
+        kw["jump"] = (index, -1)
+        size = 1.0
+        if index < t.size - index:  # the later segment is the longer one: its frame
+            e_b_ref = E_b - STEP
+    elif case == "harmonic":
+        size = _log_uniform(rng, 0.01, 0.1)
+        ph3 = rng.uniform(-np.pi, np.pi)
+        kw["harmonics"] = {3: (size * STEP * np.cos(ph3), size * STEP * np.sin(ph3))}
+    elif case == "noise":
+        size = rng.uniform(0.005, 0.1)
+        kw["noise_std"] = size * STEP
+    counts = effects.simulate_counts(rng, t, STEP, A12, a_eq, f_hz, phase, **kw)
+    return t, counts, {"A12": A12, "E_b": e_b_ref, "size": size, "f_hz": f_hz}
+
+
+def _interval(result, name):
+    if name == "E_b":
+        q = result.summary["a_eq"]
+        return q["q05"] - 0.5 * STEP, q["q95"] - 0.5 * STEP
+    q = result.summary[name]
+    return q["q05"], q["q95"]
+
+
+def one_draw(case, n_cycles, seed, sampler):
+    rng = np.random.default_rng(seed)
+    t, counts, truth = simulate_case(rng, case, n_cycles)
+    root = np.random.SeedSequence(seed)
+    fit_seed, compare_seed, after_seed = root.spawn(3)
+    started = time.perf_counter()
+    row = {"case": case, "cycles": n_cycles, "seed": seed, "size": truth["size"],
+           "A12_true": truth["A12"], "E_b_true": truth["E_b"]}
+    try:
+        comp = compare.compare_effect_models(t, counts, STEP, compare_seed)
+    except ValueError as err:
+        row["failed"] = str(err)
+        return row
+    # As the stage: the sinusoid's ensembles start at its point fit.
+    before = fit.fit_sinusoid(t, counts, STEP, fit_seed, start=comp["full_fits"]["sinusoid"]["x"],
+                              **sampler)
+    after = before
+    if comp["chosen"] != "sinusoid":
+        point = comp["full_fits"][comp["chosen"]]
+        after = fit.fit_sinusoid(t, counts, STEP, after_seed,
+                                 harmonics=tuple(comp["chosen_harmonics"]),
+                                 effects=tuple(comp["chosen_effects"]), start=point["x"],
+                                 **sampler)
+    row["wall_s"] = time.perf_counter() - started
+    right = RIGHT[case]
+    terms = comp["chosen"].split("+")
+    row |= {"chosen": comp["chosen"], "indistinguishable": "|".join(comp["indistinguishable"]),
+            "named": (comp["chosen"] == "sinusoid") if right is None else (right in terms),
+            "check_z": comp["check"]["z"], "trusted": comp["check"]["trusted"],
+            "before_converged": before.converged, "after_converged": after.converged}
+    for label, r in (("before", before), ("after", after)):
+        for name in ("A12", "E_b"):
+            lo, hi = _interval(r, name)
+            true = truth[name]
+            row[f"{name}_{label}_q05"], row[f"{name}_{label}_q95"] = lo, hi
+            row[f"{name}_{label}_cover"] = bool(lo <= true <= hi)
+            miss = max(lo - true, true - hi, 0.0)
+            row[f"{name}_{label}_confident_miss"] = bool(
+                r.converged and row["trusted"] and miss > (hi - lo))
+    return row
+
+
+def wilson(k, n, z=1.96):
+    """Wilson score interval of a binomial proportion ``k / n``."""
+    if n == 0:
+        return (np.nan, np.nan)
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return (centre - half, centre + half)
+
+
+def threshold(size, named):
+    """Size at which a logistic fit of named vs log10(size) crosses 50 % (NaN if none)."""
+    x, y = np.log10(np.asarray(size, dtype=float)), np.asarray(named, dtype=float)
+    if y.all() or not y.any() or np.ptp(x) == 0:
+        return np.nan
+
+    def nll(p):
+        eta = p[0] + p[1] * (x - x.mean())
+        return np.sum(np.logaddexp(0, eta) - y * eta)
+
+    p = minimize(nll, [0.0, 1.0], method="Nelder-Mead").x
+    if p[1] <= 0:
+        return np.nan
+    return float(10 ** (x.mean() - p[0] / p[1]))
+
+
+def summarise(draws: pd.DataFrame) -> pd.DataFrame:
+    rows = []
+    for (cycles, case), g in draws.groupby(["cycles", "case"]):
+        g = g[g["chosen"].notna()]
+        n = len(g)
+        k = int(g["named"].sum())
+        lo, hi = wilson(k, n)
+        row = {"cycles": cycles, "case": case, "n": n, "named_rate": k / n if n else np.nan,
+               "named_ci_lo": lo, "named_ci_hi": hi}
+        if case in ("hysteresis", "drift", "harmonic"):
+            th = threshold(g["size"], g["named"])
+            row["threshold"] = th
+            big = g[g["size"] >= 3 * th] if np.isfinite(th) else g.iloc[0:0]
+            row["n_at_3x"] = len(big)
+            row["named_at_3x"] = big["named"].mean() if len(big) else np.nan
+        for label in ("before", "after"):
+            for name in ("A12", "E_b"):
+                row[f"{name}_cover_{label}"] = g[f"{name}_{label}_cover"].mean()
+        row["confident_miss_rate"] = (g["A12_after_confident_miss"]
+                                      | g["E_b_after_confident_miss"]).mean()
+        row["untrusted_rate"] = (~g["trusted"].astype(bool)).mean()
+        row["converged_after"] = g["after_converged"].mean()
+        row["median_wall_s"] = g["wall_s"].median()
+        row["confused_with"] = "|".join(sorted(set(g.loc[~g["named"].astype(bool),
+                                                         "chosen"])))
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--draws", type=int, default=100, help="draws per effect and cycle count")
+    ap.add_argument("--clean-draws", type=int, default=200)
+    ap.add_argument("--cycles", type=int, nargs="+", default=[20, 100])
+    ap.add_argument("--cases", nargs="+", default=list(CASES), choices=CASES)
+    ap.add_argument("--seed", type=int, default=20261202)
+    ap.add_argument("--n-ensembles", type=int, default=4)
+    ap.add_argument("--n-walkers", type=int, default=16)
+    ap.add_argument("--n-steps", type=int, default=250)
+    ap.add_argument("--n-burn", type=int, default=100)
+    ap.add_argument("--time-budget", type=float, default=None,
+                    help="stop drawing after this many seconds (rows so far are kept)")
+    ap.add_argument("--out", default=str(ROOT / "results" / "benchmarks"))
+    ap.add_argument("--from-draws", default=None, metavar="CSV", nargs="+",
+                    help="only summarise existing lrde_effects_draws.csv files (concatenated)")
+    ap.add_argument("--first-draw", type=int, default=0,
+                    help="index of the first draw per case (continue an earlier run)")
+    args = ap.parse_args(argv)
+    if args.from_draws:
+        out = pathlib.Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        draws = pd.concat([pd.read_csv(p) for p in args.from_draws], ignore_index=True)
+        draws.to_csv(out / "lrde_effects_draws.csv", index=False)
+        summary = stamp(summarise(draws))
+        summary.to_csv(out / "lrde_effects_summary.csv", index=False)
+        with pd.option_context("display.width", 250, "display.max_columns", 40):
+            print(summary)
+        return
+    sampler = {"n_ensembles": args.n_ensembles, "n_walkers": args.n_walkers,
+               "n_steps": args.n_steps, "n_burn": args.n_burn}
+    out = pathlib.Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    # Interleave cases so that a time budget cuts every case to about the same size.
+    tasks = []
+    for cycles in args.cycles:
+        n_max = max(args.draws, args.clean_draws)
+        for i in range(args.first_draw, n_max):
+            for c_i, case in enumerate(args.cases):
+                n_case = args.clean_draws if case == "clean" else args.draws
+                if i < n_case:
+                    tasks.append((case, cycles, args.seed + 100_000 * c_i + 1000 * cycles + i))
+    started = time.perf_counter()
+    rows = []
+    for case, cycles, seed in tasks:
+        if args.time_budget is not None and time.perf_counter() - started > args.time_budget:
+            break
+        rows.append(one_draw(case, cycles, seed, sampler))
+        print({k: rows[-1].get(k) for k in ("case", "cycles", "size", "chosen", "named",
+                                            "trusted", "A12_after_cover", "E_b_after_cover",
+                                            "wall_s")}, flush=True)
+        draws = stamp(pd.DataFrame(rows))
+        draws.to_csv(out / "lrde_effects_draws.csv", index=False)
+    draws = stamp(pd.DataFrame(rows))
+    draws.to_csv(out / "lrde_effects_draws.csv", index=False)
+    summary = stamp(summarise(draws))
+    summary.to_csv(out / "lrde_effects_summary.csv", index=False)
+    with pd.option_context("display.width", 250, "display.max_columns", 40):
+        print(summary)
+
+
+if __name__ == "__main__":
+    main()

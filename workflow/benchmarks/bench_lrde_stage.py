@@ -1,0 +1,78 @@
+"""Wall time of the whole LRDE stage (fits, effect comparison, figures) per embedded log.
+
+Every log of the manifest whose ``analysis.stages`` holds ``lrde`` is ingested and run through
+:func:`enclab.lrde.pipeline.analyse_lrde_log` with ``config.yaml``'s ``lrde`` settings (and
+the log's own ``analysis.lrde``), as the ``lrde_fit`` rule does, ``--repeats`` times; the
+chosen model and the trust flags are recorded with the time.
+
+Usage::
+
+    python workflow/benchmarks/bench_lrde_stage.py --repeats 3
+    PYTHONPATH=<other checkout>/workflow python workflow/benchmarks/bench_lrde_stage.py \\
+        --label other   # the same logs with another version of the package
+
+Writes ``<out>/lrde_stage.csv`` (appends rows).
+"""
+from __future__ import annotations
+
+import argparse
+import pathlib
+import sys
+import time
+import zlib
+
+import pandas as pd
+import yaml
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from provenance import ROOT, stamp  # noqa: E402
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--manifest", default=str(ROOT / "data" / "manifest.yaml"))
+    ap.add_argument("--config", default=str(ROOT / "config.yaml"))
+    ap.add_argument("--repeats", type=int, default=1)
+    ap.add_argument("--label", default="this")
+    ap.add_argument("--out", default=str(ROOT / "results" / "benchmarks"))
+    args = ap.parse_args(argv)
+    import enclab
+    from enclab import io
+    from enclab.lrde.pipeline import analyse_lrde_log
+
+    config = yaml.safe_load(pathlib.Path(args.config).read_text())
+    devices = config.get("devices") or {}
+    data_root, entries = io.read_manifest(args.manifest, devices)
+    rows = []
+    for entry in entries:
+        if "lrde" not in ((entry.get("analysis") or {}).get("stages") or []):
+            continue
+        df, meta = io.ingest_log(entry, data_root, devices)
+        settings = dict(config.get("lrde") or {})
+        settings.update((entry.get("analysis") or {}).get("lrde") or {})
+        seed = [int(settings.pop("seed", 0)), zlib.crc32(meta["log_id"].encode())]
+        for r in range(args.repeats):
+            started = time.perf_counter()
+            block, figures, _, _ = analyse_lrde_log(df, meta, seed, settings)
+            wall = time.perf_counter() - started
+            for fig in figures.values():
+                fig.clear()
+            model = (block.get("model") or {}).get("chosen")
+            trust = block.get("trust") or {}
+            rows.append({"label": args.label, "package": str(pathlib.Path(enclab.__file__).parent),
+                         "log_id": meta["log_id"], "samples": len(df), "repeat": r,
+                         "wall_s": wall, "model": model,
+                         "A12_trusted": (trust.get("A12") or {}).get("trusted"),
+                         "converged": block["diagnostics"]["converged"]})
+            print(rows[-1], flush=True)
+    out = pathlib.Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / "lrde_stage.csv"
+    new = stamp(pd.DataFrame(rows))
+    if path.exists():
+        new = pd.concat([pd.read_csv(path), new], ignore_index=True)
+    new.to_csv(path, index=False)
+
+
+if __name__ == "__main__":
+    main()

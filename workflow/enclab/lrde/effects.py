@@ -1,0 +1,301 @@
+"""Encoder and clock effects of an extreme low-resolution encoder log, as likelihood terms.
+
+The paper's model reads ``count = floor(z + e)`` with ``z = a_eq/step + A/step sin(phi)`` and
+``e`` white Gaussian position noise of ``s`` steps (:mod:`enclab.lrde.fit`). Each effect below
+changes that reading model by one small term with its own signature in the readings:
+
+``hysteresis`` (parameter ``hysteresis``, width ``w`` in steps, SI rad)
+    The reading switches up to ``k`` when ``z + e`` rises through ``k + w/2`` and down to
+    ``k - 1`` when it falls through ``k - w/2``: a dead band of width ``w`` centred on each
+    nominal level (``a_eq`` refers to the band centre). A play of width ``w`` between the
+    motion and the encoder gives the same readings (the encoder shaft lags the motion by
+    ``w/2`` in the direction of travel), so the two physical causes are one effect here.
+    Signature: rising edges late and falling edges early by ``w/2`` each, i.e. every dwell
+    at a turning point lengthened, the mid-stroke dwells unchanged in length but shifted.
+    The state of a relay is its reading, so given the previous reading ``c`` the reading
+    ``k`` has the interval ``[k + w/2, k + 1 + w/2)`` for ``k > c``, ``[k - w/2, k + 1 - w/2)``
+    for ``k < c`` and ``[c - w/2, c + 1 + w/2)`` for ``k = c``; these partition the line, so
+    the likelihood is exact for a relay driven by ``z + e`` (first sample: the stay interval).
+``drift`` (parameter ``drift``, relative frequency change per second ``kappa``, 1/s)
+    ``f(t) = f (1 + kappa (t - t_ref))``, phase ``omega (u + kappa u^2 / 2) + phase`` with
+    ``u = t - t_ref``. Signature: the dwell pattern slides against a fixed-frequency sine,
+    opposite in the two halves of the log. ``kappa`` times the log's duration is the drift over
+    the log.
+``count_jump`` (no sampled parameter)
+    One missed (``-1``) or extra (``+1``) count at an unknown sample: the counts of the shorter
+    of the two segments are offset by ``delta`` from those of the longer one, whose frame
+    ``a_eq`` refers to. The jump index (uniform over the log) and ``delta`` (+-1, equally
+    likely) are marginalised exactly from cumulative sums of the pointwise likelihood.
+    Signature: the reading pattern is shifted by one whole step from a point on.
+``time_jitter`` (parameter ``time_jitter``, standard deviation of the sample times, SI s)
+    Each sample is taken at ``t + eta``, ``eta ~ N(0, sigma_t^2)``: to first order a position
+    noise ``z'(t) eta``, so the noise of sample ``j`` is ``sqrt(s^2 + (z'(t_j) sigma_t)^2)``.
+    Signature: noise proportional to the speed, none at the turning points (unlike the
+    constant position noise ``s``). The second-order term ``z'' eta^2 / 2`` is below
+    ``(omega sigma_t)^2 A / 2`` steps and neglected.
+
+Harmonic distortion of the motion (``harmonics`` in :func:`enclab.lrde.fit.fit_sinusoid`)
+stays a motion term; any of these effects combine with it and with each other.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.special import log_ndtr, logsumexp
+
+__all__ = ["EFFECTS", "check_effects", "effect_param_names", "effect_bounds", "effect_scales",
+           "pointwise_log_likelihood", "log_likelihood", "jump_posterior", "simulate_counts",
+           "effect_signature"]
+
+EFFECTS = ("hysteresis", "drift", "count_jump", "time_jitter")
+
+_SIGNATURES = {
+    "hysteresis": "switch-up and switch-down levels differ by a width w (dead band of the "
+                  "reading, or a play of the same width before the encoder)",
+    "drift": "linear drift of the motion frequency over the log",
+    "count_jump": "one missed or extra count at an unknown time (a step in the count offset)",
+    "time_jitter": "jitter of the sample times (noise proportional to the speed)",
+}
+
+# Internal bounds: hysteresis in steps (a dead band above half a step would swallow the
+# narrowest dwell of a 2n-step pattern), time jitter in sample intervals, drift as a total
+# relative change over the fitted log (converted to 1/s with its duration).
+_HYST_MAX = 0.5
+_JITTER_MAX = 1.0
+_DRIFT_MAX = 0.1
+
+
+def check_effects(effects) -> tuple:
+    """Validate a tuple of effect names (each once, in :data:`EFFECTS` order)."""
+    e = tuple(effects)
+    if any(x not in EFFECTS for x in e) or len(set(e)) != len(e):
+        raise ValueError(f"effects must be distinct names from {EFFECTS}, got {effects!r}")
+    return tuple(x for x in EFFECTS if x in e)
+
+
+def effect_signature(name: str) -> str:
+    """One-line description of an effect's physical reading and signature."""
+    return _SIGNATURES[name]
+
+
+def effect_param_names(effects) -> tuple:
+    """Sampled parameter names of the effects (``count_jump`` has none)."""
+    return tuple(x for x in check_effects(effects) if x != "count_jump")
+
+
+def effect_bounds(effects, duration, dt) -> list:
+    """Internal prior bounds of the effect parameters (uniform priors).
+
+    ``hysteresis`` in steps ``(0, 0.5)``, ``drift`` in 1/s within ``+-0.1 / duration``,
+    ``time_jitter`` in sample intervals ``(0, 1)``.
+    """
+    out = []
+    for name in effect_param_names(effects):
+        if name == "hysteresis":
+            out.append([0.0, _HYST_MAX])
+        elif name == "drift":
+            out.append([-_DRIFT_MAX / duration, _DRIFT_MAX / duration])
+        else:
+            out.append([0.0, _JITTER_MAX])
+    return out
+
+
+def effect_scales(effects, step, dt) -> list:
+    """SI value per internal unit of each effect parameter (rad per step, 1, s per sample)."""
+    return [{"hysteresis": step, "drift": 1.0, "time_jitter": dt}[n]
+            for n in effect_param_names(effects)]
+
+
+def _phase(p, t, t_ref, drift_col):
+    u = t - t_ref
+    omega = 2.0 * np.pi * p[:, 2:3]
+    if drift_col is None:
+        return omega * u + p[:, 3:4], omega * np.ones_like(u)
+    kappa = p[:, drift_col:drift_col + 1]
+    return omega * (u + 0.5 * kappa * u * u) + p[:, 3:4], omega * (1.0 + kappa * u)
+
+
+def _motion_and_speed(p, t, t_ref, harmonics, drift_col):
+    """Motion about the bias in steps and its time derivative (steps/s), rows of ``p``."""
+    phi, dphi = _phase(p, t, t_ref, drift_col)
+    half_a = 0.5 * p[:, 0:1]
+    motion = half_a * np.sin(phi)
+    dmotion = half_a * np.cos(phi)
+    for j, k in enumerate(harmonics):
+        c, s = p[:, 5 + 2 * j:6 + 2 * j], p[:, 6 + 2 * j:7 + 2 * j]
+        ck, sk = np.cos(k * phi), np.sin(k * phi)
+        motion += c * ck + s * sk
+        dmotion += k * (s * ck - c * sk)
+    return motion, dmotion * dphi
+
+
+def _columns(harmonics, effects):
+    first = 5 + 2 * len(harmonics)
+    return {name: first + i for i, name in enumerate(effect_param_names(effects))}
+
+
+def _log_interval(lo, hi):
+    """``log(Phi(hi) - Phi(lo))`` elementwise, accurate in both tails (reflect upper tail)."""
+    flip = lo > 0
+    lo, hi = np.where(flip, -hi, lo), np.where(flip, -lo, hi)
+    log_hi = log_ndtr(hi)
+    with np.errstate(divide="ignore"):
+        return log_hi + np.log1p(-np.exp(log_ndtr(lo) - log_hi))
+
+
+def pointwise_log_likelihood(params, t, counts, step, centre_count, t_ref, harmonics=(),
+                             effects=(), offset=0, time_blur=0.0) -> np.ndarray:
+    """``log p(count_j | previous count, theta)`` per parameter row and sample.
+
+    Parameters
+    ----------
+    params : numpy.ndarray, shape (n_rows, n_params)
+        Internal rows ``(A12/step, E_b/step, f_hz, phase, log10(s))``, then ``c_k, s_k`` per
+        harmonic (steps), then the effect parameters (:func:`effect_param_names`).
+    t, counts : numpy.ndarray
+        Sample times (s) and integer counts.
+    step, centre_count, t_ref :
+        As :func:`enclab.lrde.fit.log_likelihood`.
+    harmonics, effects : tuple
+        Model terms; ``count_jump`` is ignored here (see :func:`log_likelihood`).
+    offset : int
+        Count offset subtracted from ``counts`` (and the previous counts) before reading.
+    time_blur : float
+        Extra timing uncertainty in s, added like ``time_jitter`` (prediction of held-out
+        readings from a point fit, see :func:`enclab.lrde.compare.compare_effect_models`).
+
+    Returns
+    -------
+    numpy.ndarray, shape (n_rows, len(t))
+    """
+    p = np.atleast_2d(np.asarray(params, dtype=float))
+    effects = check_effects(effects)
+    cols = _columns(harmonics, effects)
+    t = np.asarray(t, dtype=float)
+    k = np.asarray(counts, dtype=float) - offset
+    motion, speed = _motion_and_speed(p, t, t_ref, harmonics, cols.get("drift"))
+    z = centre_count + 0.5 + p[:, 1:2] + motion
+    s = 10.0 ** p[:, 4:5]
+    if "time_jitter" in cols or time_blur > 0:
+        sig_t2 = time_blur ** 2
+        if "time_jitter" in cols:
+            dt = np.median(np.diff(t)) if t.size > 1 else 1.0
+            sig_t2 = sig_t2 + (p[:, cols["time_jitter"]:cols["time_jitter"] + 1] * dt) ** 2
+        s = np.sqrt(s * s + speed * speed * sig_t2)
+    lo = np.broadcast_to(k, z.shape).copy()
+    hi = lo + 1.0
+    if "hysteresis" in cols:
+        half_w = 0.5 * p[:, cols["hysteresis"]:cols["hysteresis"] + 1]
+        prev = np.concatenate(([k[0]], k[:-1]))
+        up, down, stay = k > prev, k < prev, k == prev
+        lo = lo + np.where(up, half_w, 0.0) - np.where(down | stay, half_w, 0.0)
+        hi = hi + np.where(up | stay, half_w, 0.0) - np.where(down, half_w, 0.0)
+    return _log_interval((lo - z) / s, (hi - z) / s)
+
+
+def _jump_terms(params, t, counts, step, centre_count, t_ref, harmonics, effects):
+    """Log-likelihood of every jump index and sign: array (n_rows, 2, n - 1) and the signs."""
+    base = pointwise_log_likelihood(params, t, counts, step, centre_count, t_ref, harmonics,
+                                    effects)
+    n = base.shape[1]
+    c0 = np.cumsum(base, axis=1)
+    total0 = c0[:, -1:]
+    idx = np.arange(1, n)  # the jump lies between samples idx - 1 and idx
+    first_short = idx < n - idx
+    out = []
+    signs = (1, -1)
+    for delta in signs:
+        shifted = pointwise_log_likelihood(params, t, counts, step, centre_count, t_ref,
+                                           harmonics, effects, offset=delta)
+        cd = np.cumsum(shifted, axis=1)
+        # Shorter segment offset by delta from the reference (longer) segment.
+        before_short = cd[:, idx - 1] + (total0 - c0[:, idx - 1])
+        after_short = c0[:, idx - 1] + (cd[:, -1:] - cd[:, idx - 1])
+        out.append(np.where(first_short, before_short, after_short))
+    return np.stack(out, axis=1), signs
+
+
+def log_likelihood(params, t, counts, step, centre_count, t_ref, harmonics=(), effects=()):
+    """Total log-likelihood per parameter row; ``count_jump`` marginalised over index and sign.
+
+    The jump's prior is uniform over the ``n - 1`` gaps between samples and the two signs.
+    """
+    effects = check_effects(effects)
+    p = np.atleast_2d(np.asarray(params, dtype=float))
+    if "count_jump" not in effects:
+        out = pointwise_log_likelihood(p, t, counts, step, centre_count, t_ref, harmonics,
+                                       effects).sum(axis=1)
+    else:
+        terms, _ = _jump_terms(p, t, counts, step, centre_count, t_ref, harmonics, effects)
+        flat = terms.reshape(p.shape[0], -1)
+        out = logsumexp(flat, axis=1) - np.log(flat.shape[1])
+    return out if np.ndim(params) == 2 else float(out[0])
+
+
+def jump_posterior(params, t, counts, step, centre_count, t_ref, harmonics=(), effects=()):
+    """Posterior of the jump at one parameter row: ``(index, delta, probability, offsets)``.
+
+    ``index`` is the first sample after the jump, ``delta`` the offset of the shorter segment,
+    ``probability`` the posterior mass of that (index, sign) within +-1 sample, and ``offsets``
+    the per-sample count offset under that mode (0 on the reference segment).
+    """
+    p = np.atleast_2d(np.asarray(params, dtype=float))[:1]
+    terms, signs = _jump_terms(p, t, counts, step, centre_count, t_ref, harmonics,
+                               tuple(e for e in effects))
+    flat = terms[0]
+    post = np.exp(flat - logsumexp(flat))
+    sign_i, gap = np.unravel_index(int(np.argmax(post)), post.shape)
+    index = int(gap) + 1
+    mass = float(post[sign_i, max(gap - 1, 0):gap + 2].sum())
+    n = np.size(t)
+    offsets = np.zeros(n, dtype=np.int64)
+    if index < n - index:
+        offsets[:index] = signs[sign_i]
+    else:
+        offsets[index:] = signs[sign_i]
+    return index, int(signs[sign_i]), mass, offsets
+
+
+def simulate_counts(rng, t, step, A12, a_eq, f_hz, phase, t_ref=0.0, noise_std=0.0,
+                    harmonics=None, hysteresis=0.0, drift=0.0, jump=None, time_jitter=0.0,
+                    n_rep=None):
+    """Brute-force readings of the effect model (the reference for the likelihood's tests).
+
+    Sample times are perturbed (``time_jitter``, s), the motion evaluated there exactly (with
+    ``drift`` in 1/s and ``harmonics`` ``{k: (c_k, s_k)}`` in rad), position noise added
+    (``noise_std``, rad), and a relay with dead band ``hysteresis`` (rad) run sample by sample
+    from the state ``floor(z_0 + e_0)``; ``jump = (index, delta)`` adds ``delta`` to the counts
+    from ``index`` on.
+
+    Returns
+    -------
+    numpy.ndarray of int64, shape (len(t),) or (n_rep, len(t))
+    """
+    t = np.asarray(t, dtype=float)
+    reps = 1 if n_rep is None else int(n_rep)
+    tt = t + (rng.normal(0.0, time_jitter, (reps, t.size)) if time_jitter > 0 else 0.0)
+    u = tt - t_ref
+    phi = 2.0 * np.pi * f_hz * (u + 0.5 * drift * u * u) + phase
+    theta = 0.5 * A12 * np.sin(phi)
+    for k, (c_k, s_k) in (harmonics or {}).items():
+        theta = theta + c_k * np.cos(k * phi) + s_k * np.sin(k * phi)
+    x = (theta + a_eq) / step
+    x = np.broadcast_to(x, (reps, t.size)).copy()
+    if noise_std > 0:
+        x += rng.normal(0.0, noise_std / step, x.shape)
+    half_w = 0.5 * hysteresis / step
+    if half_w > 0:
+        out = np.empty(x.shape, dtype=np.int64)
+        state = np.floor(x[:, 0])
+        out[:, 0] = state
+        for j in range(1, t.size):
+            xj = x[:, j]
+            up = xj >= state + 1.0 + half_w
+            down = xj < state - half_w
+            state = np.where(up, np.floor(xj - half_w), np.where(down, np.floor(xj + half_w),
+                                                                   state))
+            out[:, j] = state
+    else:
+        out = np.floor(x).astype(np.int64)
+    if jump is not None:
+        out[:, int(jump[0]):] += int(jump[1])
+    return out[0] if n_rep is None else out
