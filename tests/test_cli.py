@@ -102,7 +102,7 @@ def test_console_script_is_declared():
 
 def _fast_config(path: Path) -> Path:
     config = yaml.safe_load((ROOT / "config.yaml").read_text())
-    config["lrde"].update(n_ensembles=2, n_walkers=16, n_steps=100, n_burn=100, ppc_draws=5,
+    config["lrde"].update(n_ensembles=2, n_walkers=16, n_steps=100, max_steps=100, n_burn=100, ppc_draws=5,
                           motion_models=[[], [3]])
     path.write_text(yaml.safe_dump(config))
     return path

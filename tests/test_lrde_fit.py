@@ -215,3 +215,22 @@ def test_ensembles_side_by_side_sample_the_target(inner):
         values = block.reshape(-1, 3)
         assert np.all(np.abs(values.mean(axis=0)) < 4 / np.sqrt(ess))
         assert np.all(np.abs(values.var(axis=0) - 1) < 4 * np.sqrt(2 / ess))
+
+
+def test_chains_go_on_until_converged_up_to_max_steps():
+    # 2 ensembles x 16 walkers x 50 steps hold 1600 draws per parameter: ESS >= 1000 would
+    # need an autocorrelation time below 1.6 steps, which the DE moves never reach here, so the
+    # short fit stops unconverged and the extended one goes on in blocks of n_steps.
+    df, _ = _log(11)
+    t, c = df["t"].to_numpy(), df["counts"].to_numpy()
+    kwargs = dict(SMALL, n_steps=50, n_burn=60)
+    short = fit.fit_sinusoid(t, c, STEP, seed=5, **kwargs)
+    assert short.chains.shape[1] == 50 and not short.converged
+    longer = fit.fit_sinusoid(t, c, STEP, seed=5, max_steps=400, **kwargs)
+    kept = longer.chains.shape[1]
+    assert kept % 50 == 0 and 50 < kept <= 400
+    assert longer.converged or kept == 400
+    # the first block is the short fit's chain: the extension only appends
+    np.testing.assert_array_equal(longer.chains[:, :50], short.chains)
+    with pytest.raises(ValueError, match="max_steps"):
+        fit.fit_sinusoid(t, c, STEP, seed=5, max_steps=40, **kwargs)

@@ -57,7 +57,7 @@ def write_workspace(work: Path, entries: list[dict], fig7_group: str) -> None:
     config["derivatives"]["bank"] = {"d": [1, 2], "n": [1, 2], "fc_hz": [50, 100],
                                      "discretization": ["exponential", "bilinear"]}
     config["figures"]["fig7_group"] = fig7_group
-    config["lrde"].update(n_ensembles=2, n_walkers=16, n_steps=100, n_burn=100, ppc_draws=5,
+    config["lrde"].update(n_ensembles=2, n_walkers=16, n_steps=100, max_steps=100, n_burn=100, ppc_draws=5,
                           motion_models=[[], [3]])
     (work / "config.yaml").write_text(yaml.safe_dump(config))
 

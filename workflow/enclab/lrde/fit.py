@@ -605,10 +605,25 @@ def _check_int_counts(counts, n):
     return c.astype(np.int64)
 
 
+def _chain_diagnostics(internal: np.ndarray, names) -> tuple[dict, dict, dict]:
+    """Integrated autocorrelation time (largest over ensembles), split R-hat across ensembles
+    and ESS per parameter of chains shaped (n_ensembles, n_steps, n_walkers, ndim)."""
+    tau, rhat, ess = {}, {}, {}
+    for i, name in enumerate(names):
+        with _quiet_emcee():
+            tau_i = max(float(emcee.autocorr.integrated_time(internal[e, :, :, i:i + 1],
+                                                              quiet=True)[0])
+                        for e in range(internal.shape[0]))
+        tau[name] = tau_i
+        rhat[name] = diagnostics.split_rhat_ensembles(internal[:, :, :, i])
+        ess[name] = float(internal[:, :, :, i].size / max(tau_i, 1.0))
+    return tau, rhat, ess
+
+
 def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250, n_burn=150,
                  f_hz=None, truth=None, rest_position=None, sigma_range=None,
                  sigma_prior="uniform", moves="de", harmonics=(), effects=(),
-                 start=None) -> FitResult:
+                 start=None, max_steps=None) -> FitResult:
     """Posterior of stroke, bias deviation, frequency, phase and noise from coarse counts.
 
     Parameters
@@ -626,6 +641,10 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
     n_ensembles, n_walkers, n_steps, n_burn : int
         Independent emcee ensembles, walkers per ensemble (>= 10, even), production steps and
         discarded burn-in steps per ensemble.
+    max_steps : int, optional
+        When the chains have not converged after ``n_steps`` (R-hat > 1.01 or ESS < 1000),
+        they go on in blocks of ``n_steps`` up to ``max_steps`` production steps, all kept
+        (the burn-in stays discarded). Default ``n_steps``: no extension.
     f_hz : float, optional
         Known motion frequency (initialisation and cycle segmentation); estimated if None.
     truth : array_like, optional
@@ -670,8 +689,10 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
         raise ValueError("t must be a finite, strictly increasing 1-D array of >= 16 samples")
     counts = _check_int_counts(counts, t.size)
     step = model._check_step(step)
+    max_steps = n_steps if max_steps is None else max_steps
     for name, value, low in (("n_ensembles", n_ensembles, 2), ("n_walkers", n_walkers, 10),
-                             ("n_steps", n_steps, 50), ("n_burn", n_burn, 0)):
+                             ("n_steps", n_steps, 50), ("n_burn", n_burn, 0),
+                             ("max_steps", max_steps, n_steps)):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
             raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
     if n_walkers % 2:
@@ -712,21 +733,20 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
     sampler.random_state = np.random.RandomState(
         int(root.spawn(1)[0].generate_state(1)[0])).get_state()
     sampler.run_mcmc(np.concatenate(starts), n_burn + n_steps, progress=False)
-    chain = sampler.get_chain(discard=n_burn)  # (n_steps, n_ens * n_walkers, ndim)
-    internal = chain.reshape(n_steps, n_ensembles, n_walkers, ndim).transpose(1, 0, 2, 3)
+    kept = n_steps
+    while True:
+        chain = sampler.get_chain(discard=n_burn)  # (kept, n_ens * n_walkers, ndim)
+        internal = chain.reshape(kept, n_ensembles, n_walkers, ndim).transpose(1, 0, 2, 3)
+        tau, rhat, ess = _chain_diagnostics(internal, names)
+        converged = bool(max(rhat.values()) <= 1.01 and min(ess.values()) >= 1000)
+        if converged or kept >= max_steps:
+            break
+        more = min(n_steps, max_steps - kept)
+        sampler.run_mcmc(None, more, progress=False)
+        kept += more
     acceptance = sampler.acceptance_fraction
     si = _to_si(internal, step, setup["extra_scale"])
     samples = si.reshape(-1, ndim)
-    tau, rhat, ess = {}, {}, {}
-    for i, name in enumerate(names):
-        with _quiet_emcee():
-            tau_i = max(float(emcee.autocorr.integrated_time(internal[e, :, :, i:i + 1],
-                                                              quiet=True)[0])
-                        for e in range(n_ensembles))
-        tau[name] = tau_i
-        rhat[name] = diagnostics.split_rhat_ensembles(internal[:, :, :, i])
-        ess[name] = float(internal[:, :, :, i].size / max(tau_i, 1.0))
-    converged = bool(max(rhat.values()) <= 1.01 and min(ess.values()) >= 1000)
     a_eq = (centre + 0.5) * step + samples[:, 1]
     summary = {name: _quantiles(samples[:, i]) for i, name in enumerate(names)}
     summary["a_eq"] = _quantiles(a_eq)

@@ -15,7 +15,8 @@ With a truth channel (and ``settings["use_truth"]``, default True) the fit repor
 it uses that known motion centre; otherwise both are None with the reason.
 
 Settings keys (all optional): ``channel``, ``requantize``, ``use_truth``, ``rest_position``,
-``f_hz``, ``n_ensembles`` (4), ``n_walkers`` (16), ``n_steps`` (250), ``n_burn`` (100),
+``f_hz``, ``n_ensembles`` (4), ``n_walkers`` (16), ``n_steps`` (250), ``max_steps`` (1000:
+the chains go on until they converge, up to this many steps), ``n_burn`` (100),
 ``ppc_draws`` (40), ``sigma_range_steps`` (prior range of the jitter in steps) and
 ``sigma_prior`` (``"uniform"`` or ``"log-uniform"``), see
 :func:`enclab.lrde.fit.fit_sinusoid`; ``motion_models`` (harmonic orders of the candidate
@@ -45,7 +46,7 @@ __all__ = ["select_channels", "analyse_lrde_log"]
 _log = logging.getLogger(__name__)
 
 _KNOWN_SETTINGS = {"channel", "requantize", "use_truth", "rest_position", "f_hz", "n_ensembles",
-                   "n_walkers", "n_steps", "n_burn", "ppc_draws", "sigma_range_steps",
+                   "n_walkers", "n_steps", "max_steps", "n_burn", "ppc_draws", "sigma_range_steps",
                    "sigma_prior", "motion_models", "effects", "effect_pairs", "trust_z"}
 
 
@@ -60,6 +61,7 @@ def _sampler_settings(settings: dict) -> dict:
     return {"n_ensembles": int(settings.get("n_ensembles", 4)),
             "n_walkers": int(settings.get("n_walkers", 16)),
             "n_steps": int(settings.get("n_steps", 250)),
+            "max_steps": int(settings.get("max_steps", 1000)),
             "n_burn": int(settings.get("n_burn", 100)),
             "sigma_range": settings.get("sigma_range_steps"),
             "sigma_prior": settings.get("sigma_prior", "uniform")}
