@@ -109,7 +109,7 @@ def test_figures_structure():
     fig3 = plots.closed_loop_plot(cl_df, cl_p)
     assert fig3.axes[0].get_ylabel() == "bias deviation [deg]"
     dev_line = fig3.axes[0].get_lines()[0]
-    cb = simulate.cycle_bias(cl_df["t"].to_numpy(), cl_df["theta"].to_numpy(), cl_p["f_hz"])
+    cb = dwell.cycle_bias(cl_df["t"].to_numpy(), cl_df["theta"].to_numpy(), cl_p["f_hz"])
     np.testing.assert_allclose(dev_line.get_ydata(),
                                np.rad2deg(cb["bias"] - cl_p["ideal_bias"]))
 
@@ -144,7 +144,7 @@ def test_closed_loop_bias_stays_in_proposition_1_band():
     settled = cl_df[cl_df["t"] >= 0.5]
     t, theta = settled["t"].to_numpy(), settled["theta"].to_numpy()
     truth = plots.truth_bias_deviation(t, theta, cl_p["f_hz"], STEP, cl_p["offset_a"], 0)
-    per_period = simulate.cycle_bias(t, theta, cl_p["f_hz"])
+    per_period = dwell.cycle_bias(t, theta, cl_p["f_hz"])
     np.testing.assert_allclose(truth["E_b"], per_period["bias"] - cl_p["ideal_bias"],
                                atol=1e-15)
     half_eps = 0.5 * np.asarray(model.epsilon(truth["A12"].to_numpy(), STEP))

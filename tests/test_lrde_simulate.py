@@ -46,7 +46,7 @@ def test_closed_loop_shows_fig6_bias_restoring(offset_frac):
     df, p = simulate.closed_loop_pid_log(rng, offset_frac=offset_frac, n_cycles=60)
     assert df["counts"].dtype == np.int64
     settled = df[df["t"] >= 20 / p["f_hz"]]  # drop 20 cycles of transient
-    per_cycle = simulate.cycle_bias(settled["t"].to_numpy(), settled["theta"].to_numpy(),
+    per_cycle = dwell.cycle_bias(settled["t"].to_numpy(), settled["theta"].to_numpy(),
                                     p["f_hz"])
     # Readings stay 2n = 4 steps peak to peak, symmetric about count 0 ...
     tab = dwell.cycle_table(settled["counts"].to_numpy(), settled["t"].to_numpy(), STEP,
@@ -67,7 +67,7 @@ def test_closed_loop_shows_fig6_bias_restoring(offset_frac):
     assert abs(STEP * whole["counts"].mean()) < 0.1 * c0_edge
     # The bias moves (it is not pinned by the initial state): it visits both sides of the
     # ideal bias during the run.
-    dev_all = simulate.cycle_bias(df["t"].to_numpy(), df["theta"].to_numpy(), p["f_hz"])
+    dev_all = dwell.cycle_bias(df["t"].to_numpy(), df["theta"].to_numpy(), p["f_hz"])
     dev_all = dev_all["bias"].to_numpy()[2:] - p["ideal_bias"]
     assert dev_all.min() < 0 < dev_all.max()
 
@@ -75,7 +75,7 @@ def test_closed_loop_shows_fig6_bias_restoring(offset_frac):
 def test_cycle_bias_of_pure_sinusoid():
     t = np.arange(4000) / 2000.0
     theta = model.sinusoid(t, 0.3, 0.05, 20.0, 0.0)
-    cb = simulate.cycle_bias(t, theta, 20.0)
+    cb = dwell.cycle_bias(t, theta, 20.0)
     assert len(cb) == 39
     # 100 samples per period: the sampled extremes miss the crest by <= A (pi/100)^2/2 = 7e-4 A.
     np.testing.assert_allclose(cb["A12"], 0.3, atol=0.15 * (np.pi / 100) ** 2)

@@ -97,7 +97,7 @@ def test_backlash_found_clean_left_alone(analysed):
     clean = analysed["clean"][0]["selection"]
     assert [e["name"] for e in backlash["effects"]] [:1] == ["backlash"]
     assert clean["effects"] == []
-    after, before = analysed["backlash"][2].set_index("stage")["std"], None
+    after = analysed["backlash"][2].set_index("stage")["std"]
     assert after["after"] < 0.2 * after["before"]
 
 

@@ -93,7 +93,6 @@ def test_jitter_on_clean_log_sits_at_its_boundary_and_is_not_selected():
     ctx = res._ctx
     base = res._fitted
     new = sel._extend(base, sel.fx.TimestampJitter(), ctx)
-    sig = new.x[-1]
     lr = 2 * (new.ll - base.ll)
     assert lr >= -1e-6
     assert sel._lr_pvalue(lr, 1, 1) > 0.01

@@ -11,7 +11,6 @@ corpus needs no binary fixtures.
 """
 from __future__ import annotations
 
-import copy
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable

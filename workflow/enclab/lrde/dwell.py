@@ -27,7 +27,7 @@ import pandas as pd
 
 from enclab.lrde import model
 
-__all__ = ["run_lengths", "segment_cycles", "cycle_table", "dwell_summary"]
+__all__ = ["run_lengths", "segment_cycles", "cycle_table", "dwell_summary", "cycle_bias"]
 
 CYCLE_COLUMNS = [
     "cycle", "i_start", "i_end", "t_start", "t_end", "period",
@@ -371,3 +371,27 @@ def dwell_summary(table: pd.DataFrame) -> dict:
         eb = used["E_b_dwell"].to_numpy()[tested]
         out["prop2_sign_Eb_agreement"] = float(np.mean(np.sign(dc[tested]) == np.sign(eb)))
     return out
+
+
+def cycle_bias(t, theta, f_hz) -> pd.DataFrame:
+    """Per-period stroke and bias of a (near) sinusoidal true angle.
+
+    Cuts ``theta`` into consecutive windows of one period ``1/f_hz`` from ``t[0]`` and returns
+    per window ``t_mid``, ``A12 = max - min`` and ``bias = (max + min)/2`` (eq. 2 with
+    ``A1 = max``, ``A2 = -min``).
+    """
+    f_hz = float(f_hz)
+    if not np.isfinite(f_hz) or f_hz <= 0:
+        raise ValueError(f"f_hz must be a finite number > 0, got {f_hz!r}")
+    t = np.asarray(t, dtype=float)
+    theta = np.asarray(theta, dtype=float)
+    if t.shape != theta.shape or t.ndim != 1:
+        raise ValueError(f"t and theta must be 1-D of equal length, got {t.shape}, {theta.shape}")
+    index = np.floor((t - t[0]) * f_hz).astype(np.int64)
+    n_full = int(index[-1])  # the last window may be incomplete: drop it
+    keep = index < n_full
+    frame = pd.DataFrame({"k": index[keep], "t": t[keep], "theta": theta[keep]})
+    g = frame.groupby("k")
+    hi, lo = g["theta"].max(), g["theta"].min()
+    return pd.DataFrame({"t_mid": g["t"].mean().to_numpy(), "A12": (hi - lo).to_numpy(),
+                         "bias": (0.5 * (hi + lo)).to_numpy()})

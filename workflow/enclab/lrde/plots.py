@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from enclab.lrde import dwell, model, simulate
+from enclab.lrde import dwell, model
 
 __all__ = ["corner_plot", "posterior_predictive_dwell", "dwell_ppc_plot", "closed_loop_plot",
            "bias_cycles_plot", "truth_bias_deviation"]
@@ -136,7 +136,7 @@ def closed_loop_plot(df: pd.DataFrame, params: dict) -> Figure:
     missing = {"t", "theta", "counts"} - set(df.columns)
     if missing:
         raise ValueError(f"df lacks columns {sorted(missing)}")
-    per_cycle = simulate.cycle_bias(df["t"].to_numpy(), df["theta"].to_numpy(), params["f_hz"])
+    per_cycle = dwell.cycle_bias(df["t"].to_numpy(), df["theta"].to_numpy(), params["f_hz"])
     step = params["step"]
     half_eps = 0.5 * np.asarray(model.epsilon(per_cycle["A12"].to_numpy(), step))
     dev = per_cycle["bias"].to_numpy() - params["ideal_bias"]
@@ -163,9 +163,9 @@ def truth_bias_deviation(t, truth, f_hz, step, offset_a, centre_count) -> pd.Dat
 
     ``E_b = bias + a - (c + 1/2) step`` (eq. 14 relative to the centre count ``c``: zero when
     the motion is centred on the middle of reading ``c``), with ``bias`` and ``A12`` per period
-    from :func:`enclab.lrde.simulate.cycle_bias`. Columns ``t_mid, A12, bias, E_b``.
+    from :func:`enclab.lrde.dwell.cycle_bias`. Columns ``t_mid, A12, bias, E_b``.
     """
-    per_period = simulate.cycle_bias(t, truth, f_hz)
+    per_period = dwell.cycle_bias(t, truth, f_hz)
     per_period["E_b"] = per_period["bias"] + offset_a - (centre_count + 0.5) * step
     return per_period
 

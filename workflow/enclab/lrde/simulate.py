@@ -26,8 +26,7 @@ from scipy.linalg import expm
 
 from enclab.lrde import model
 
-__all__ = ["ROS_DRILL_STEP", "ROS_DRILL_A12", "open_loop_log", "closed_loop_pid_log",
-           "cycle_bias"]
+__all__ = ["ROS_DRILL_STEP", "ROS_DRILL_A12", "open_loop_log", "closed_loop_pid_log"]
 
 ROS_DRILL_STEP = float(np.deg2rad(0.09))
 ROS_DRILL_A12 = float(np.deg2rad(0.31))
@@ -251,25 +250,3 @@ def closed_loop_pid_log(rng, step=ROS_DRILL_STEP, amplitude=float(np.deg2rad(0.1
               "disturbance": float(disturbance), "noise_std": float(noise_std),
               "truth_step": truth_step, "n_cycles": n_cycles}
     return df, params
-
-
-def cycle_bias(t, theta, f_hz) -> pd.DataFrame:
-    """Per-period stroke and bias of a (near) sinusoidal true angle.
-
-    Cuts ``theta`` into consecutive windows of one period ``1/f_hz`` from ``t[0]`` and returns
-    per window ``t_mid``, ``A12 = max - min`` and ``bias = (max + min)/2`` (eq. 2 with
-    ``A1 = max``, ``A2 = -min``).
-    """
-    f_hz = _check_positive("f_hz", f_hz)
-    t = np.asarray(t, dtype=float)
-    theta = np.asarray(theta, dtype=float)
-    if t.shape != theta.shape or t.ndim != 1:
-        raise ValueError(f"t and theta must be 1-D of equal length, got {t.shape}, {theta.shape}")
-    index = np.floor((t - t[0]) * f_hz).astype(np.int64)
-    n_full = int(index[-1])  # the last window may be incomplete: drop it
-    keep = index < n_full
-    frame = pd.DataFrame({"k": index[keep], "t": t[keep], "theta": theta[keep]})
-    g = frame.groupby("k")
-    hi, lo = g["theta"].max(), g["theta"].min()
-    return pd.DataFrame({"t_mid": g["t"].mean().to_numpy(), "A12": (hi - lo).to_numpy(),
-                         "bias": (0.5 * (hi + lo)).to_numpy()})

@@ -8,7 +8,6 @@ continuous angle.
 """
 from __future__ import annotations
 
-import math
 
 import numpy as np
 
