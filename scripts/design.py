@@ -1,5 +1,5 @@
 """Rule design: config design: block -> design.json (the design block), designs.csv, pareto.png."""
-from enclab import io
+from enclab.core import atomic, canonical
 from enclab.design.pipeline import run_design, truth_trajectory
 from enclab.runner import run
 
@@ -7,12 +7,12 @@ from enclab.runner import run
 def main(smk):
     trajectory = None
     if "canonical" in smk.input.keys():
-        trajectory = truth_trajectory(*io.read_canonical(smk.input.canonical))
+        trajectory = truth_trajectory(*canonical.read_canonical(smk.input.canonical))
     block, table, figure = run_design(smk.params.design, smk.params.devices, smk.params.derivatives,
                                       trajectory)
-    io.write_json(block, smk.output.block)
-    io.write_table(table, smk.output.table)
-    io.save_figure(figure, smk.output.figure)
+    atomic.write_json(block, smk.output.block)
+    atomic.write_table(table, smk.output.table)
+    atomic.save_figure(figure, smk.output.figure)
 
 
 run(snakemake, main)  # noqa: F821

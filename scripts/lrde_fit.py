@@ -1,24 +1,24 @@
 """Rule lrde_fit: dwell patterns and the emcee fit of stroke, bias and offset of one log."""
 import zlib
 
-from enclab import io
+from enclab.core import atomic, canonical
 from enclab.lrde.pipeline import analyse_lrde_log
 from enclab.runner import run
 
 
 def main(smk):
-    df, meta = io.read_canonical(smk.input.canonical)
+    df, meta = canonical.read_canonical(smk.input.canonical)
     settings = dict(smk.params.settings)
     # One stream per log, reproducible from the configured seed whatever the job order.
     seed = [int(settings.pop("seed", 0)), zlib.crc32(meta["log_id"].encode())]
     block, figures, report_md, cycles = analyse_lrde_log(df, meta, seed, settings)
     block["seed"] = seed
-    io.write_table(cycles, smk.output.cycles)
-    io.save_figure(figures["corner"], smk.output.corner)
-    io.save_figure(figures["dwell_ppc"], smk.output.dwell)
-    io.save_figure(figures["bias_cycles"], smk.output.bias_cycles)
-    io.write_text(report_md, smk.output.report)
-    io.write_json(block, smk.output.block)
+    atomic.write_table(cycles, smk.output.cycles)
+    atomic.save_figure(figures["corner"], smk.output.corner)
+    atomic.save_figure(figures["dwell_ppc"], smk.output.dwell)
+    atomic.save_figure(figures["bias_cycles"], smk.output.bias_cycles)
+    atomic.write_text(report_md, smk.output.report)
+    atomic.write_json(block, smk.output.block)
 
 
 run(snakemake, main)  # noqa: F821

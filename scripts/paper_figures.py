@@ -1,14 +1,15 @@
 """Rule paper_figures: paper 000 Fig. 6 (position, per configuration) and Fig. 7 (derivatives
 against the cutoff at the zero configuration) equivalents."""
-from enclab import io, plots
+from enclab.core import atomic
+from enclab.propagation import plots
 from enclab.runner import run
 
 
 def main(smk):
-    pooled = io.read_table(smk.input.pooled)
+    pooled = atomic.read_table(smk.input.pooled)
     fig = smk.params.figures
-    io.save_figure(plots.fig6_position_error(pooled, level=fig["fig6_level"]), smk.output.fig6)
-    io.save_figure(plots.fig7_derivative_error(pooled, fig["fig7_group"], level=fig["fig6_level"]),
+    atomic.save_figure(plots.fig6_position_error(pooled, level=fig["fig6_level"]), smk.output.fig6)
+    atomic.save_figure(plots.fig7_derivative_error(pooled, fig["fig7_group"], level=fig["fig6_level"]),
                    smk.output.fig7)
 
 

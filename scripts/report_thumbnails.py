@@ -3,7 +3,7 @@ kind of figure; the full-size figures stay where their rules wrote them)."""
 import os
 from collections import defaultdict
 
-from enclab import io
+from enclab.core import atomic
 from enclab.runner import run
 
 
@@ -13,9 +13,9 @@ def main(smk):
         folder = thumb.split("/")[3]  # results/report/thumbs/<kind>/...
         by_folder[os.path.join("results/report/thumbs", folder)].append((source, thumb))
     for folder, pairs in by_folder.items():
-        with io.atomic_folder(folder) as tmp:
+        with atomic.atomic_folder(folder) as tmp:
             for source, thumb in pairs:
-                io.save_thumbnail(source, os.path.join(tmp, os.path.relpath(thumb, folder)),
+                atomic.save_thumbnail(source, os.path.join(tmp, os.path.relpath(thumb, folder)),
                                   max_width=smk.params.width)
 
 

@@ -1,6 +1,6 @@
 """Rule rig: the runs of one rig fitted together for one measured channel; shared effects on
 training runs, scored on held-out runs (docs/residuals.md "Rigs")."""
-from enclab import io
+from enclab.core import atomic, canonical
 from enclab.residuals import rig
 from enclab.residuals.rig_report import report_rig
 from enclab.runner import run
@@ -10,7 +10,7 @@ def main(smk):
     p = smk.params
     runs = []
     for path, member in zip(smk.input.canonical, p.runs):
-        df, meta = io.read_canonical(path)
+        df, meta = canonical.read_canonical(path)
         runs.append(rig.run_from_canonical(df, meta, p.pair["measured"], p.pair["truth"],
                                            list(p.compliance), member["conditions"], member["log_id"]))
     s = dict(p.settings)
@@ -19,12 +19,12 @@ def main(smk):
                        latency=True if s.get("latency") == "run" else "shared")
     out = report_rig(smk.wildcards.rig, p.pair["measured"], runs, spec, list(p.splits), s["spacings"],
                      p.truth_counts_per_rev)
-    io.write_json(out["block"], smk.output.block)
+    atomic.write_json(out["block"], smk.output.block)
     for key in ("heldout", "splits", "conditions"):
-        io.write_table(out["tables"][key], smk.output[key])
+        atomic.write_table(out["tables"][key], smk.output[key])
     for key in ("map", "compliance", "heldout_png", "remains"):
-        io.save_figure(out["figures"][key.replace("_png", "")], smk.output[key])
-    io.write_text(out["markdown"], smk.output.report)
+        atomic.save_figure(out["figures"][key.replace("_png", "")], smk.output[key])
+    atomic.write_text(out["markdown"], smk.output.report)
 
 
 run(snakemake, main)  # noqa: F821

@@ -1,12 +1,11 @@
-"""Tests for enclab.batch: pooling of repeat runs, ratio summaries and bound violations."""
+"""Tests for enclab.propagation.batch: pooling of repeat runs, ratio summaries and bound violations."""
 from __future__ import annotations
 
 import numpy as np
 import pandas as pd
 import pytest
 import scipy.stats
-
-from enclab import batch
+from enclab.propagation import batch
 
 T_975_DF2 = 4.302652729911275  # Student t 97.5 % quantile, 2 degrees of freedom (tables)
 

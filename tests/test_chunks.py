@@ -16,23 +16,28 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-
-from enclab import io, runner, stages
-from enclab.errors import EnclabInputError
-from enclab.simulate import phantom_protocol_run
-from workspace import (copy_workspace, phantom_entry, result_digests, run_workflow,
-                       write_workspace)
+from enclab import runner, stages
+from enclab.core import atomic
+from enclab.core.errors import EnclabInputError
+from enclab.propagation.simulate import phantom_protocol_run
+from workspace import (
+    copy_workspace,
+    phantom_entry,
+    result_digests,
+    run_workflow,
+    write_workspace,
+)
 
 
 def _process(entry, folder):
     # Writes a first output, then fails as the entry asks: a failure after some outputs exist.
-    io.write_json({"id": entry["id"]}, folder / "first.json")
+    atomic.write_json({"id": entry["id"]}, folder / "first.json")
     if entry.get("fail") == "input":
         raise EnclabInputError("logs/x.csv", "empty or NaN value", column="angle", row=12,
                                row_label="line", expected="a finite number")
     if entry.get("fail") == "bug":
         raise KeyError("no such key")
-    io.write_json({"id": entry["id"]}, folder / "second.json")
+    atomic.write_json({"id": entry["id"]}, folder / "second.json")
 
 
 def test_run_chunk_isolates_each_failure_and_leaves_no_partial_output(tmp_path):
@@ -210,7 +215,7 @@ def small_chunked(tmp_path_factory):
     entries = []
     for k in (1, 2, 3):
         log, _ = phantom_protocol_run(np.zeros(3), np.random.default_rng(k), duration_s=2.0)
-        io.write_table(log, data / f"good{k}.parquet")
+        atomic.write_table(log, data / f"good{k}.parquet")
         entries.append(phantom_entry(f"good{k}", f"good{k}.parquet", "g"))
     write_workspace(work, entries, fig7_group="g")
     first = run_workflow(work, *_SMALL_TARGETS)
@@ -225,7 +230,7 @@ def test_chunked_changed_log_reruns_its_chunk_only(small_chunked, tmp_path):
     before = {k: (p.stat().st_ino, p.stat().st_mtime_ns, p.read_bytes())
               for k, p in summaries.items()}
     log, _ = phantom_protocol_run(np.full(3, 0.1), np.random.default_rng(7), duration_s=2.0)
-    io.write_table(log, work / "logs/good3.parquet")
+    atomic.write_table(log, work / "logs/good3.parquet")
     again = run_workflow(work, *_SMALL_TARGETS)
     assert again.returncode == 0, again.stderr[-3000:]
     # Snakemake finds the changed input: good3's chunk and publish job run, the other chunk

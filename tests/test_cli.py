@@ -16,11 +16,10 @@ import numpy as np
 import pandas as pd
 import pytest
 import yaml
-
 from enclab import cli
+from enclab.core.manifest import validate_manifest
+from enclab.core.quantize import quantize
 from enclab.lrde import simulate as lrde_sim
-from enclab.manifest import validate_manifest
-from enclab.quantize import quantize
 from workspace import ROOT, SNAKEMAKE
 
 OUT_STEP = 2 * np.pi / 8192

@@ -1,4 +1,4 @@
-"""Tests for enclab.filters: the derivative estimators of Colonnese & Okamura Fig. 5."""
+"""Tests for enclab.propagation.filters: the derivative estimators of Colonnese & Okamura Fig. 5."""
 from __future__ import annotations
 
 import math
@@ -6,8 +6,7 @@ import math
 import numpy as np
 import pytest
 import scipy.signal
-
-from enclab.filters import (
+from enclab.propagation.filters import (
     DISCRETIZATIONS,
     DerivativeFilter,
     apply,
@@ -15,8 +14,8 @@ from enclab.filters import (
     h2_norm_sq,
     h2_norm_sq_closed_form,
     impulse_response,
-    lag_seconds,
     l1_norm,
+    lag_seconds,
     settle_samples,
     state_space,
     transfer_function,

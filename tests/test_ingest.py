@@ -1,4 +1,4 @@
-"""Tests for enclab.ingest (pure conversions) and the end-to-end enclab.io.ingest_log on fixtures."""
+"""Tests for enclab.core.ingest (pure conversions) and the end-to-end enclab.core.ingest.ingest_log on fixtures."""
 from __future__ import annotations
 
 import importlib.util
@@ -7,12 +7,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from enclab import io
-from enclab.errors import EnclabInputError
-from enclab.ingest import canonicalize, detect_grid, off_grid, time_report, unwrap_counter
-from enclab.io import RawLog
-from enclab.manifest import validate_manifest
+from enclab.core import canonical, ingest, readers
+from enclab.core.errors import EnclabInputError
+from enclab.core.ingest import (
+    canonicalize,
+    detect_grid,
+    off_grid,
+    time_report,
+    unwrap_counter,
+)
+from enclab.core.manifest import validate_manifest
+from enclab.core.readers import RawLog
 
 FIXTURES = Path(__file__).parent / "fixtures" / "ingest"
 _spec = importlib.util.spec_from_file_location("make_fixtures", FIXTURES / "make_fixtures.py")
@@ -126,7 +131,7 @@ def test_wrap_bits_in_a_channel_via_the_parquet_fixture():
     e = entry([ch("c", unit="counts", counts_per_rev=1024, wrap_bits=8)],
               time={"column": "index", "unit": "samples", "rate_hz": 100}, file="table.parquet", format="parquet")
     e["channels"][0]["column"] = "counter"
-    df, _ = canonicalize(io.read_raw(e, FIXTURES), e, DEVICES)
+    df, _ = canonicalize(readers.read_raw(e, FIXTURES), e, DEVICES)
     # the fixture writes (250 + 4 * COUNTS) mod 256
     np.testing.assert_array_equal(df["c"], 250 + 4 * COUNTS)
 
@@ -286,7 +291,7 @@ def test_repeats_gaps_and_jitter_are_reported():
 def test_time_file_fixture_reports_the_repeat_and_the_gap():
     e = entry([ch("q1", column=0)], {"file": "sample_major_time.txt", "nominal_rate_hz": 100},
               file="sample_major.txt", format="text", reader={"values_per_sample": 2})
-    df, meta = io.ingest_log(e, FIXTURES, DEVICES)
+    df, meta = ingest.ingest_log(e, FIXTURES, DEVICES)
     report = meta["time_report"]
     # the repeated stamp of sample 5 makes the next step a double one: two gaps in all
     assert (report["n_repeated"], report["n_gaps"]) == (1, 2)
@@ -343,13 +348,13 @@ def test_ingest_log_end_to_end_on_the_mrdlab_style_fixture(tmp_path):
                   sign=-1)],
               {"column": "Time [s]", "nominal_rate_hz": 100}, file="mrd_style.txt", format="text",
               reader={"comment": "%", "column_names": "last_comment"})
-    df, meta = io.ingest_log(e, FIXTURES, DEVICES)
-    assert meta["source"]["sha256"] == io.file_sha256(FIXTURES / "mrd_style.txt")
+    df, meta = ingest.ingest_log(e, FIXTURES, DEVICES)
+    assert meta["source"]["sha256"] == readers.file_sha256(FIXTURES / "mrd_style.txt")
     steps = {c["name"]: c["step"] for c in meta["channels"]}
     # channel b counts -2 * COUNTS on an encoder twice as fine with the opposite sign: same angle
     np.testing.assert_allclose(df["a"] * steps["a"], df["b"] * steps["b"], rtol=1e-15)
-    io.write_canonical(df, meta, tmp_path / "c.parquet")
-    back, back_meta = io.read_canonical(tmp_path / "c.parquet")
+    canonical.write_canonical(df, meta, tmp_path / "c.parquet")
+    back, back_meta = canonical.read_canonical(tmp_path / "c.parquet")
     assert back_meta == meta
     assert back["a"].dtype == np.int64
 
@@ -358,7 +363,7 @@ def test_ingest_csv_fixture_in_every_unit():
     e = entry([ch("deg", column="theta_deg", unit="deg"), ch("mrad", column="theta_mrad", unit="mrad"),
                ch("enc", unit="counts", counts_per_rev=fixtures.CPR), ch("x", column="x_mm", unit="mm")],
               {"column": "time_ms", "unit": "ms"}, file="basic.csv")
-    df, meta = io.ingest_log(e, FIXTURES, DEVICES)
+    df, meta = ingest.ingest_log(e, FIXTURES, DEVICES)
     theta = fixtures.STEP * COUNTS
     np.testing.assert_allclose(df["deg"], theta, rtol=1e-14, atol=1e-16)
     np.testing.assert_allclose(df["mrad"], theta, rtol=1e-14, atol=1e-16)

@@ -1,4 +1,4 @@
-"""Tests for enclab.io: readers (csv, text, sample-major, parquet, mat), error locations, writers.
+"""Tests for enclab.core.readers, canonical and atomic: readers (csv, text, sample-major, parquet, mat), error locations, writers.
 
 The fixtures in tests/fixtures/ingest are written by make_fixtures.py in that folder; they all
 hold the integer counts COUNTS at 100 Hz (see its docstring), so each reader is checked
@@ -23,10 +23,9 @@ import pyarrow as pa  # noqa: E402
 import pyarrow.parquet as pq  # noqa: E402
 import pytest  # noqa: E402
 import scipy.io  # noqa: E402
-
-from enclab import io  # noqa: E402
-from enclab.errors import EnclabInputError  # noqa: E402
-from enclab.manifest import validate_manifest  # noqa: E402
+from enclab.core import atomic, canonical, readers  # noqa: E402
+from enclab.core.errors import EnclabInputError  # noqa: E402
+from enclab.core.manifest import validate_manifest  # noqa: E402
 
 FIXTURES = Path(__file__).parent / "fixtures" / "ingest"
 _spec = importlib.util.spec_from_file_location("make_fixtures", FIXTURES / "make_fixtures.py")
@@ -49,8 +48,8 @@ def aux(name, column, **extra) -> dict:
     return {"name": name, "column": column, "role": "aux", **extra}
 
 
-def read(data_root, **fields) -> io.RawLog:
-    return io.read_raw(entry(**fields), data_root)
+def read(data_root, **fields) -> readers.RawLog:
+    return readers.read_raw(entry(**fields), data_root)
 
 
 def input_error(data_root, **fields) -> EnclabInputError:
@@ -150,9 +149,9 @@ def test_trailing_empty_rows_are_errors_when_not_skipped():
 def test_entry_files_lists_data_and_time_file():
     e = entry(file="sample_major.txt", format="text", reader={"values_per_sample": 2},
               time={"file": "sample_major_time.txt"}, channels=[aux("q1", 0)])
-    assert io.entry_files(e, "root") == [os.path.join("root", "sample_major.txt"),
+    assert readers.entry_files(e, "root") == [os.path.join("root", "sample_major.txt"),
                                          os.path.join("root", "sample_major_time.txt")]
-    assert io.entry_files(entry(file="a.csv", format="csv", channels=[aux("q", 0)]), "r") == [
+    assert readers.entry_files(entry(file="a.csv", format="csv", channels=[aux("q", 0)]), "r") == [
         os.path.join("r", "a.csv")]
 
 
@@ -375,19 +374,19 @@ def test_truncated_gzip_names_the_file_and_the_fix(tmp_path):
 
 def test_write_json_converts_numpy_and_non_finite(tmp_path):
     path = tmp_path / "deep" / "dir" / "x.json"
-    io.write_json({"a": np.float64(1.5), "b": np.arange(3), "c": [math.nan, np.inf], "d": np.int64(7),
+    atomic.write_json({"a": np.float64(1.5), "b": np.arange(3), "c": [math.nan, np.inf], "d": np.int64(7),
                    "e": (1, 2), "f": Path("p")}, path)
-    assert io.read_json(path) == {"a": 1.5, "b": [0, 1, 2], "c": [None, None], "d": 7, "e": [1, 2], "f": "p"}
+    assert atomic.read_json(path) == {"a": 1.5, "b": [0, 1, 2], "c": [None, None], "d": 7, "e": [1, 2], "f": "p"}
     assert path.read_text().startswith('{\n  "a"')
     assert [p.name for p in path.parent.iterdir()] == ["x.json"]  # no temporary file left
 
 
 def test_atomic_writer_leaves_old_file_on_failure(tmp_path):
     path = tmp_path / "x.json"
-    io.write_json({"ok": 1}, path)
+    atomic.write_json({"ok": 1}, path)
     with pytest.raises(TypeError):
-        io.write_json({"bad": object()}, path)
-    assert io.read_json(path) == {"ok": 1}
+        atomic.write_json({"bad": object()}, path)
+    assert atomic.read_json(path) == {"ok": 1}
     assert [p.name for p in tmp_path.iterdir()] == ["x.json"]
 
 
@@ -396,7 +395,7 @@ def test_rewriting_an_output_removes_what_a_killed_writer_left(tmp_path):
     # written again. Temporary files of other outputs are not touched.
     (tmp_path / ".x.json.k3j9.tmp.json").write_text("partial")
     (tmp_path / ".y.json.k3j9.tmp.json").write_text("another output's")
-    io.write_json({"ok": 1}, tmp_path / "x.json")
+    atomic.write_json({"ok": 1}, tmp_path / "x.json")
     assert sorted(p.name for p in tmp_path.iterdir()) == [".y.json.k3j9.tmp.json", "x.json"]
 
 
@@ -404,15 +403,15 @@ def test_atomic_outputs_get_the_mode_of_a_plain_open(tmp_path):
     # What a plain open() / mkdir gives under this process's umask, not mkstemp's 0600.
     mask = os.umask(0o027)
     try:
-        io._umask.cache_clear()
-        io.write_json({"ok": 1}, tmp_path / "x.json")
-        with io.atomic_folder(tmp_path / "staged") as folder:
+        atomic._umask.cache_clear()
+        atomic.write_json({"ok": 1}, tmp_path / "x.json")
+        with atomic.atomic_folder(tmp_path / "staged") as folder:
             (folder / "a.txt").write_text("a")
         (tmp_path / "plain.json").write_text("{}")  # a plain open()
         (tmp_path / "plain_dir").mkdir()
     finally:
         os.umask(mask)
-        io._umask.cache_clear()
+        atomic._umask.cache_clear()
     assert stat.S_IMODE((tmp_path / "x.json").stat().st_mode) == 0o640
     assert stat.S_IMODE((tmp_path / "plain.json").stat().st_mode) == 0o640
     assert stat.S_IMODE((tmp_path / "staged").stat().st_mode) == 0o750
@@ -422,35 +421,35 @@ def test_atomic_outputs_get_the_mode_of_a_plain_open(tmp_path):
 @pytest.mark.parametrize("suffix", [".csv", ".parquet"])
 def test_write_and_read_table(tmp_path, suffix):
     df = pd.DataFrame({"a": [1, 2, 3], "b": [0.5, 1.5, 2.5]})
-    io.write_table(df, tmp_path / f"t{suffix}")
-    pd.testing.assert_frame_equal(io.read_table(tmp_path / f"t{suffix}"), df)
+    atomic.write_table(df, tmp_path / f"t{suffix}")
+    pd.testing.assert_frame_equal(atomic.read_table(tmp_path / f"t{suffix}"), df)
 
 
 def test_write_table_rejects_unknown_suffix(tmp_path):
     with pytest.raises(ValueError, match="csv or .parquet"):
-        io.write_table(pd.DataFrame({"a": [1]}), tmp_path / "t.xlsx")
+        atomic.write_table(pd.DataFrame({"a": [1]}), tmp_path / "t.xlsx")
 
 
 def test_canonical_round_trip_keeps_dtypes_and_metadata(tmp_path):
     df = pd.DataFrame({"t": np.arange(3) / 10.0, "theta": np.array([1, 2, 3], dtype=np.int64)})
     meta = {"log_id": "x", "fs_hz": 10.0, "channels": [{"name": "theta", "step": 1e-3}], "jitter": math.nan}
-    io.write_canonical(df, meta, tmp_path / "c.parquet")
-    back, back_meta = io.read_canonical(tmp_path / "c.parquet")
+    canonical.write_canonical(df, meta, tmp_path / "c.parquet")
+    back, back_meta = canonical.read_canonical(tmp_path / "c.parquet")
     pd.testing.assert_frame_equal(back, df)
     assert back_meta == {**meta, "jitter": None}
     assert json.loads(pq.read_schema(tmp_path / "c.parquet").metadata[b"enclab"]) == back_meta
 
 
 def test_read_canonical_without_metadata(tmp_path):
-    io.write_parquet(pd.DataFrame({"t": [0.0]}), tmp_path / "p.parquet")
+    atomic.write_parquet(pd.DataFrame({"t": [0.0]}), tmp_path / "p.parquet")
     with pytest.raises(EnclabInputError, match="without enclab metadata"):
-        io.read_canonical(tmp_path / "p.parquet")
+        canonical.read_canonical(tmp_path / "p.parquet")
 
 
 def test_save_figure_writes_png_and_closes(tmp_path):
     fig, ax = plt.subplots()
     ax.plot([0, 1], [0, 1])
-    io.save_figure(fig, tmp_path / "f" / "a.png", dpi=50)
+    atomic.save_figure(fig, tmp_path / "f" / "a.png", dpi=50)
     assert (tmp_path / "f" / "a.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert not plt.fignum_exists(fig.number)
 
@@ -459,12 +458,12 @@ def test_save_figure_pdf_is_reproducible(tmp_path):
     def save(name):
         fig, ax = plt.subplots()
         ax.plot([0, 1], [1, 0])
-        io.save_figure(fig, tmp_path / name)
+        atomic.save_figure(fig, tmp_path / name)
         return (tmp_path / name).read_bytes()
 
     assert save("a.pdf") == save("b.pdf")
 
 
 def test_write_text_and_file_sha256(tmp_path):
-    io.write_text("abc", tmp_path / "a.txt")
-    assert io.file_sha256(tmp_path / "a.txt") == "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"
+    atomic.write_text("abc", tmp_path / "a.txt")
+    assert readers.file_sha256(tmp_path / "a.txt") == "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"

@@ -1,16 +1,15 @@
-"""Tests of enclab.kinematics: analytic values, finite-difference checks, shapes, factory."""
+"""Tests of enclab.propagation.kinematics: analytic values, finite-difference checks, shapes, factory."""
 from __future__ import annotations
 
 import math
 
 import numpy as np
 import pytest
-
-from enclab.kinematics import (
+from enclab.propagation.kinematics import (
     DEVICE_KINDS,
     DHChain,
-    Planar2R,
     PhantomPremium15,
+    Planar2R,
     SingleJoint,
     franka_panda,
     make_device,

@@ -1,4 +1,4 @@
-"""Tests for enclab.manifest.validate_manifest and enclab.io.read_manifest."""
+"""Tests for enclab.core.manifest.validate_manifest and enclab.core.readers.read_manifest."""
 from __future__ import annotations
 
 import copy
@@ -6,10 +6,9 @@ from pathlib import Path
 
 import pytest
 import yaml
-
-from enclab import io
-from enclab.errors import EnclabInputError
-from enclab.manifest import SCHEMA_PATH, validate_manifest
+from enclab.core import readers
+from enclab.core.errors import EnclabInputError
+from enclab.core.manifest import SCHEMA_PATH, validate_manifest
 
 DEVICES = {"axis": {"kind": "single_joint"}, "franka_panda": {"kind": "franka_panda"}}
 SOURCE = "data/m.yaml"
@@ -177,21 +176,21 @@ def test_read_manifest_returns_a_path_and_entries(tmp_path: Path):
     path = tmp_path / "m.yaml"
     path.write_text("data_root: data\nlogs:\n  - {id: a, file: a.csv, format: csv, time: {rate_hz: 10},\n"
                     "     channels: [{name: x, column: 0, role: aux}]}\n")
-    data_root, entries = io.read_manifest(path, DEVICES)
+    data_root, entries = readers.read_manifest(path, DEVICES)
     assert data_root == Path("data")
     assert [e["id"] for e in entries] == ["a"]
 
 
 def test_read_manifest_missing_file(tmp_path: Path):
     with pytest.raises(EnclabInputError, match="manifest file not found"):
-        io.read_manifest(tmp_path / "none.yaml", DEVICES)
+        readers.read_manifest(tmp_path / "none.yaml", DEVICES)
 
 
 def test_read_manifest_yaml_syntax_error_names_the_line(tmp_path: Path):
     path = tmp_path / "m.yaml"
     path.write_text("logs:\n  - id: a\n    file: [unclosed\n")
     with pytest.raises(EnclabInputError) as info:
-        io.read_manifest(path, DEVICES)
+        readers.read_manifest(path, DEVICES)
     assert info.value.file == str(path) and info.value.row_label == "line"
     assert info.value.row is not None and 3 <= info.value.row <= 4
     assert "YAML syntax error" in str(info.value)
@@ -204,7 +203,7 @@ def test_read_manifest_parses_as_pyyaml_safe_load():
     path = root / "data/manifest.yaml"
     devices = yaml.safe_load((root / "config.yaml").read_text())["devices"]
     expected = validate_manifest(yaml.safe_load(path.read_text()), devices, str(path))
-    data_root, entries = io.read_manifest(path, devices)
+    data_root, entries = readers.read_manifest(path, devices)
     assert len(entries) == 72 and (str(data_root), entries) == expected
 
 
@@ -212,7 +211,7 @@ def test_read_manifest_schema_error_names_the_file(tmp_path: Path):
     path = tmp_path / "m.yaml"
     path.write_text("logs: []\n")
     with pytest.raises(EnclabInputError) as info:
-        io.read_manifest(path, DEVICES)
+        readers.read_manifest(path, DEVICES)
     assert str(info.value).startswith(f"{path}: key 'logs'")
 
 

@@ -1,4 +1,4 @@
-"""Tests for enclab.moments: error moments with batch-means and pooled-run intervals."""
+"""Tests for enclab.propagation.moments: error moments with batch-means and pooled-run intervals."""
 from __future__ import annotations
 
 import math
@@ -7,8 +7,7 @@ import numpy as np
 import pytest
 import scipy.signal
 import scipy.stats
-
-from enclab.moments import error_moments, pooled_std_ratio
+from enclab.propagation.moments import error_moments, pooled_std_ratio
 
 STEP = 1e-3
 

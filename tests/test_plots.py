@@ -6,10 +6,9 @@ import io
 import numpy as np
 import pandas as pd
 import pytest
+from enclab.propagation import plots
 from matplotlib.container import ErrorbarContainer
 from matplotlib.figure import Figure
-
-from enclab import plots
 
 STEP = 1e-3  # rad, the paper's artificial quantization interval
 FS = 1000.0

@@ -7,15 +7,14 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from enclab.core import readers
+from enclab.core.errors import EnclabInputError
+from enclab.core.manifest import validate_manifest
+from enclab.core.quantize import quantize, requantize_counts
+from enclab.lrde import dwell
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
-
-from enclab import io
-from enclab.errors import EnclabInputError
-from enclab.lrde import dwell
-from enclab.manifest import validate_manifest
-from enclab.quantize import quantize, requantize_counts
 
 DEVICES = {"axis": {"kind": "single_joint"}}
 finite = st.floats(min_value=-1e6, max_value=1e6, allow_nan=False, allow_infinity=False)
@@ -74,7 +73,7 @@ def test_csv_reader_round_trips_written_values(q):
     with tempfile.TemporaryDirectory() as folder:
         table = pd.DataFrame({"t": np.arange(q.size) * 1e-3, "q": q})
         table.to_csv(Path(folder) / "x.csv", index=False, float_format="%.17g")
-        raw = io.read_raw(_entry("x.csv"), folder)
+        raw = readers.read_raw(_entry("x.csv"), folder)
     np.testing.assert_array_equal(raw.channels["q"], q)
     np.testing.assert_array_equal(raw.time, table["t"].to_numpy())
     np.testing.assert_array_equal(raw.locations, np.arange(q.size) + 2)  # header is line 1
@@ -86,7 +85,7 @@ def test_parquet_reader_round_trips_written_values(q):
     with tempfile.TemporaryDirectory() as folder:
         pd.DataFrame({"t": np.arange(q.size) * 1e-3, "q": q}).to_parquet(Path(folder) / "x.parquet")
         entry = _entry("x.parquet") | {"format": "parquet", "reader": {}}
-        raw = io.read_raw(entry, folder)
+        raw = readers.read_raw(entry, folder)
     np.testing.assert_array_equal(raw.channels["q"], q)
 
 
@@ -100,7 +99,7 @@ def test_csv_reader_fuzz_gives_a_table_or_a_clear_error(body, header):
     with tempfile.TemporaryDirectory() as folder:
         (Path(folder) / "x.csv").write_text(header + body)
         try:
-            raw = io.read_raw(_entry("x.csv"), folder)
+            raw = readers.read_raw(_entry("x.csv"), folder)
         except EnclabInputError as err:
             message = str(err)
             assert "x.csv" in message and "\n" not in message

@@ -1,14 +1,19 @@
-"""Tests for enclab.quantize: the encoder quantizer on integer counts."""
+"""Tests for enclab.core.quantize: the encoder quantizer on integer counts."""
 from __future__ import annotations
 
 import math
 
 import numpy as np
 import pytest
+from enclab.core.quantize import (
+    level_label,
+    multiple_label,
+    quantize,
+    ratio_of,
+    requantize_counts,
+)
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
-from enclab.quantize import level_label, multiple_label, quantize, ratio_of, requantize_counts
 
 STEP = 1e-3
 

@@ -18,7 +18,7 @@ REAL = REPO.parent / "shared" / "data" / "real"
 if not REAL.is_dir():
     pytest.skip(f"real logs not available ({REAL} is absent)", allow_module_level=True)
 
-from enclab import io  # noqa: E402
+from enclab.core import ingest, readers  # noqa: E402
 
 pytestmark = pytest.mark.shared
 MANIFEST = REPO / "data" / "manifest.real.yaml"
@@ -28,9 +28,9 @@ MANIFEST = REPO / "data" / "manifest.real.yaml"
 def logs():
     devices = yaml.safe_load((REPO / "config.yaml").read_text())["devices"]
     # data_root is relative to the repository root (the working directory of the workflow)
-    data_root, entries = io.read_manifest(MANIFEST, devices)
+    data_root, entries = readers.read_manifest(MANIFEST, devices)
     data_root = REPO / data_root
-    return {e["id"]: (e, *io.ingest_log(e, data_root, devices)) for e in entries}
+    return {e["id"]: (e, *ingest.ingest_log(e, data_root, devices)) for e in entries}
 
 
 def channel(meta, name):

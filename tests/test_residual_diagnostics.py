@@ -10,10 +10,9 @@ import math
 
 import numpy as np
 import pytest
-from scipy import integrate
-
-from enclab.quantize import quantize, requantize_counts
+from enclab.core.quantize import quantize, requantize_counts
 from enclab.residuals import diagnostics as dg
+from scipy import integrate
 
 STEP = 0.767e-3
 TRUTH_STEP = STEP / 17.93  # MRDLab-like: motor encoder / gear ratio against the output encoder

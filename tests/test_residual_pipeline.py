@@ -10,8 +10,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import yaml
-
-from enclab.quantize import quantize
+from enclab.core.quantize import quantize
 from enclab.residuals import pipeline
 from workspace import ROOT, SNAKEMAKE, snakemake_command
 
@@ -175,13 +174,13 @@ REAL = ROOT.parent / "shared" / "data" / "real"
 @pytest.mark.shared
 @pytest.mark.skipif(not REAL.is_dir(), reason=f"real logs not available ({REAL} is absent)")
 def test_mrdlab_output_encoder_lags_the_motor_in_the_direction_of_motion():
-    from enclab import io
+    from enclab.core import ingest, readers
     from enclab.residuals import diagnostics as dg
 
     devices = yaml.safe_load((ROOT / "config.yaml").read_text())["devices"]
-    data_root, entries = io.read_manifest(ROOT / "data/manifest.real.yaml", devices)
+    data_root, entries = readers.read_manifest(ROOT / "data/manifest.real.yaml", devices)
     entry = next(e for e in entries if e["id"] == "mrdlab_0p5hz")
-    df, meta = io.ingest_log(entry, ROOT / data_root, devices)
+    df, meta = ingest.ingest_log(entry, ROOT / data_root, devices)
     assert pipeline.residual_pairs(meta) == [
         {"measured": "theta_cui", "truth": "theta_motor", "joint": 1},
         {"measured": "theta_front", "truth": "theta_motor", "joint": 1}]

@@ -16,7 +16,7 @@ REAL = REPO.parent / "shared" / "data" / "real"
 if not REAL.is_dir():
     pytest.skip(f"real logs not available ({REAL} is absent)", allow_module_level=True)
 
-from enclab import io  # noqa: E402
+from enclab.core import ingest, readers  # noqa: E402
 from enclab.residuals import rig  # noqa: E402
 from enclab.residuals.rig_manifest import rig_groups  # noqa: E402
 
@@ -25,7 +25,7 @@ pytestmark = pytest.mark.shared
 
 def test_mrdlab_rig_held_out_run():
     devices = yaml.safe_load((REPO / "config.yaml").read_text())["devices"]
-    data_root, entries = io.read_manifest(REPO / "data" / "manifest.real.yaml", devices)
+    data_root, entries = readers.read_manifest(REPO / "data" / "manifest.real.yaml", devices)
     group = rig_groups(entries)["mrdlab_tool4"]
     assert len(group["runs"]) == 20
     by_id = {e["id"]: e for e in entries}
@@ -33,7 +33,7 @@ def test_mrdlab_rig_held_out_run():
     runs = {}
     for member in group["runs"]:
         if member["log_id"] in wanted:
-            df, meta = io.ingest_log(by_id[member["log_id"]], REPO / data_root, devices)
+            df, meta = ingest.ingest_log(by_id[member["log_id"]], REPO / data_root, devices)
             runs[member["log_id"]] = rig.run_from_canonical(df, meta, "theta_cui", "theta_motor", ["torque_back"],
                                                             member["conditions"], member["log_id"])
     spec = rig.RigSpec(spacing=0.05, compliance={"torque_back": ["linear"]}, latency="shared")

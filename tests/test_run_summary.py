@@ -14,10 +14,10 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 import pytest  # noqa: E402
+from enclab import progress, report
+from enclab.core import atomic  # noqa: E402
 from PIL import Image  # noqa: E402
 from snakemake_interface_logger_plugins.common import LogEvent  # noqa: E402
-
-from enclab import io, progress, report  # noqa: E402
 
 
 def _quant_summary(log_id, warnings=()):
@@ -130,7 +130,7 @@ def test_progress_prints_one_line_per_job_and_failure(tmp_path, monkeypatch):
     # the handler sets the variable for the jobs it starts: restored after this test
     monkeypatch.setenv(progress.QUIET_JOBS_ENV, "")
     log = tmp_path / "ingest.log"
-    log.write_text("2026 enclab.ingest ERROR [bad] bad.csv: line 3: NaN value.\n")
+    log.write_text("2026 enclab.core.ingest ERROR [bad] bad.csv: line 3: NaN value.\n")
     out = stdio.StringIO()
     handler = progress.ProgressHandler(stream=out)
     emit = handler.emit
@@ -177,13 +177,13 @@ def test_logger_plugin_is_found_by_snakemake():
 def test_thumbnail_is_small_deterministic_and_keeps_the_aspect(tmp_path):
     fig, ax = plt.subplots(figsize=(10, 8))
     ax.plot(np.random.default_rng(0).normal(size=20000))
-    io.save_figure(fig, tmp_path / "full.png", dpi=150)
-    io.save_thumbnail(tmp_path / "full.png", tmp_path / "a" / "thumb.png", max_width=480)
-    io.save_thumbnail(tmp_path / "full.png", tmp_path / "b.png", max_width=480)
+    atomic.save_figure(fig, tmp_path / "full.png", dpi=150)
+    atomic.save_thumbnail(tmp_path / "full.png", tmp_path / "a" / "thumb.png", max_width=480)
+    atomic.save_thumbnail(tmp_path / "full.png", tmp_path / "b.png", max_width=480)
     with Image.open(tmp_path / "a" / "thumb.png") as thumb:
         assert thumb.size == (480, 384) and thumb.mode == "P"
     assert (tmp_path / "a" / "thumb.png").read_bytes() == (tmp_path / "b.png").read_bytes()
     # a tenth of the pixels, a 64-colour palette: well under a third of the bytes
     assert (tmp_path / "b.png").stat().st_size < (tmp_path / "full.png").stat().st_size / 3
     with pytest.raises(ValueError, match="max_width"):
-        io.save_thumbnail(tmp_path / "full.png", tmp_path / "c.png", max_width=4)
+        atomic.save_thumbnail(tmp_path / "full.png", tmp_path / "c.png", max_width=4)

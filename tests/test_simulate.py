@@ -1,4 +1,4 @@
-"""Tests of enclab.simulate: the simulated Phantom Premium protocol logs."""
+"""Tests of enclab.propagation.simulate: the simulated Phantom Premium protocol logs."""
 from __future__ import annotations
 
 import math
@@ -6,9 +6,12 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
-
-from enclab.kinematics import PhantomPremium15
-from enclab.simulate import fig6_configurations_deg, phantom_protocol_run, sinusoid_motion
+from enclab.propagation.kinematics import PhantomPremium15
+from enclab.propagation.simulate import (
+    fig6_configurations_deg,
+    phantom_protocol_run,
+    sinusoid_motion,
+)
 
 STEP = 1.25e-4
 CENTRE = np.deg2rad([10.0, -20.0, 30.0])

@@ -1,7 +1,7 @@
-"""Tests for enclab.stream: streamed moments equal the in-memory moments rule.
+"""Tests for enclab.propagation.stream: streamed moments equal the in-memory moments rule.
 
 The streamed path (pieces of a Parquet file, filter state carried across pieces, per-batch
-mergeable accumulators) must reproduce :func:`enclab.analysis.empirical_rows` on the whole
+mergeable accumulators) must reproduce :func:`enclab.propagation.analysis.empirical_rows` on the whole
 log up to round-off. Both compute the same sums in a different order, so the differences
 are a few ulps of each sum (largest seen on the Franka case: 9e-16 relative); 1e-12 leaves
 a margin of ~1e3 over that and still catches a misplaced sample: starting every filtered row
@@ -15,10 +15,10 @@ import numpy as np
 import pandas as pd
 import pytest
 import yaml
-
-from enclab import analysis, io, stream
-from enclab import filters as flt
-from enclab.moments import error_moments
+from enclab.core import atomic, canonical
+from enclab.propagation import analysis, stream
+from enclab.propagation import filters as flt
+from enclab.propagation.moments import error_moments
 
 ROOT = Path(__file__).resolve().parents[1]
 REL = 1e-12
@@ -66,8 +66,8 @@ def test_streamed_franka_log_equals_in_memory_moments(tmp_path, config):
     straddle row groups, batch boundaries and the start-up transients."""
     meta, chunks = stream.franka_motion_chunks(20.0, 1000.0, seed=7, chunk_rows=3000)
     path = tmp_path / "long.parquet"
-    assert io.write_canonical_chunks(chunks, meta, path) == 20_000
-    df, meta_read = io.read_canonical(path)
+    assert canonical.write_canonical_chunks(chunks, meta, path) == 20_000
+    df, meta_read = canonical.read_canonical(path)
     assert meta_read["n_samples"] == 20_000 and len(df) == 20_000
     assert pq_row_groups(path) == 7
     levels = analysis.plan_levels(meta_read, config["requantize"])
@@ -75,7 +75,7 @@ def test_streamed_franka_log_equals_in_memory_moments(tmp_path, config):
     bank = analysis.filter_bank(derivatives)
     expected = in_memory_rows(df, meta_read, levels, bank, derivatives, moments)
 
-    meta_s, n_rows, pieces = io.iter_canonical(path, batch_rows=997)
+    meta_s, n_rows, pieces = canonical.iter_canonical(path, batch_rows=997)
     assert n_rows == 20_000 and meta_s == meta_read
     timings = {}
     got = stream.empirical_rows(pieces, meta_s, levels, bank, derivatives["architectures"],
@@ -94,8 +94,8 @@ def test_time_ranges_in_worker_processes_equal_in_memory_moments(tmp_path, confi
     merge of the accumulators is exact up to round-off."""
     meta, chunks = stream.franka_motion_chunks(12.0, 1000.0, seed=5, chunk_rows=2500)
     path = tmp_path / "split.parquet"
-    io.write_canonical_chunks(chunks, meta, path)
-    df, meta = io.read_canonical(path)
+    canonical.write_canonical_chunks(chunks, meta, path)
+    df, meta = canonical.read_canonical(path)
     levels = analysis.plan_levels(meta, config["requantize"])
     derivatives, moments = config["derivatives"], config["moments"]
     bank = [flt.DerivativeFilter.from_dict(dict(s)) for s in derivatives["export"]]
@@ -125,15 +125,15 @@ def test_time_ranges_are_fewer_when_the_log_is_short():
 def test_reading_a_row_range_gives_those_rows(tmp_path):
     meta, chunks = stream.franka_motion_chunks(3.0, 1000.0, seed=2, chunk_rows=700)
     path = tmp_path / "rows.parquet"
-    io.write_canonical_chunks(chunks, meta, path)
-    df, _ = io.read_canonical(path)
+    canonical.write_canonical_chunks(chunks, meta, path)
+    df, _ = canonical.read_canonical(path)
     for start, stop in [(0, 3000), (650, 1450), (700, 1400), (2999, 3000), (1200, 1200)]:
-        _, n_rows, pieces = io.iter_canonical(path, batch_rows=300, start=start, stop=stop)
+        _, n_rows, pieces = canonical.iter_canonical(path, batch_rows=300, start=start, stop=stop)
         got = pd.concat(list(pieces) or [df.iloc[:0]], ignore_index=True)
         assert n_rows == 3000
         pd.testing.assert_frame_equal(got, df.iloc[start:stop].reset_index(drop=True))
     with pytest.raises(ValueError, match="not inside its 3000 rows"):
-        io.iter_canonical(path, start=10, stop=3001)
+        canonical.iter_canonical(path, start=10, stop=3001)
 
 
 def test_trigonometry_table_equals_numpy_bit_for_bit():
@@ -153,7 +153,7 @@ def test_trigonometry_table_equals_numpy_bit_for_bit():
 def test_joint_major_kinematics_equal_the_device_methods():
     """The stream's kinematics (table trigonometry, frames composed column by column) give
     device.forward and device.jacobian of the same angles."""
-    from enclab.kinematics import PhantomPremium15, franka_panda
+    from enclab.propagation.kinematics import PhantomPremium15, franka_panda
 
     rng = np.random.default_rng(4)
     for device, step in ((franka_panda(), 2 * np.pi / 2**18), (PhantomPremium15(), 1e-4)):
@@ -194,7 +194,7 @@ def test_streamed_single_joint_without_device_and_random_pieces(config):
 
 @pytest.mark.parametrize("skip", [0, 5, 333])
 def test_batch_moments_equal_error_moments_for_any_split(skip):
-    """The accumulator against enclab.moments.error_moments on an AR(1) signal with a
+    """The accumulator against enclab.propagation.moments.error_moments on an AR(1) signal with a
     non-zero mean, split at random places (including inside the skipped samples)."""
     rng = np.random.default_rng(skip)
     n = 10_007
@@ -265,14 +265,14 @@ def test_cli_moments_equal_the_in_memory_result(tmp_path, config):
     assert stream.main(["moments", str(log), str(out), "--configfile",
                         str(ROOT / "config.yaml"), "--bank", "export", "--chunk-rows", "701",
                         "--timings", str(timings)]) == 0
-    df, meta = io.read_canonical(log)
+    df, meta = canonical.read_canonical(log)
     levels = analysis.plan_levels(meta, config["requantize"])
     bank = [flt.DerivativeFilter.from_dict(dict(s)) for s in config["derivatives"]["export"]]
     expected = in_memory_rows(df, meta, levels, bank, config["derivatives"], config["moments"])
-    result = io.read_json(out)
+    result = atomic.read_json(out)
     assert result["log_id"] == meta["log_id"]
     assert_rows_equal(result["rows"], expected)
-    assert io.read_json(timings)["n_samples"] == 4000
+    assert atomic.read_json(timings)["n_samples"] == 4000
 
 
 def test_cli_reports_a_file_that_is_not_a_canonical_log(tmp_path, capsys):
@@ -298,11 +298,11 @@ def test_reading_in_pieces_holds_about_one_row_group(tmp_path):
     chunks = (pd.DataFrame({f"c{j}": rng.integers(-2**40, 2**40, rows) for j in range(8)})
               for _ in range(groups))
     path = tmp_path / "mem.parquet"
-    io.write_canonical_chunks(chunks, meta, path)
+    canonical.write_canonical_chunks(chunks, meta, path)
     group_bytes = rows * 8 * 8
     base = pa.total_allocated_bytes()
     peak, n = 0, 0
-    _, _, pieces = io.iter_canonical(path, batch_rows=7_000)
+    _, _, pieces = canonical.iter_canonical(path, batch_rows=7_000)
     for piece in pieces:
         n += len(piece)
         peak = max(peak, pa.total_allocated_bytes() - base)

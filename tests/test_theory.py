@@ -1,8 +1,8 @@
-"""Tests for enclab.theory: Table II (worst case, PQN), the exact model, trajectory bounds.
+"""Tests for enclab.propagation.theory: Table II (worst case, PQN), the exact model, trajectory bounds.
 
 Every prediction is checked against an independent method: brute force over the residues of
 the quantizer, numerical integration, white-noise Monte Carlo, seeded simulations of quantized
-trajectories (pooled over independent runs, intervals from :func:`enclab.moments.pooled_std_ratio`)
+trajectories (pooled over independent runs, intervals from :func:`enclab.propagation.moments.pooled_std_ratio`)
 and closed forms derived in the comments (constant-velocity ramp).
 """
 from __future__ import annotations
@@ -11,18 +11,22 @@ import math
 
 import numpy as np
 import pytest
-
-from enclab.filters import DerivativeFilter, apply, h2_norm_sq, impulse_response, l1_norm, settle_samples
-from enclab.kinematics import PhantomPremium15
-from enclab.moments import pooled_std_ratio
-from enclab.quantize import quantize, requantize_counts
-from enclab.theory import (
+from enclab.core.quantize import quantize, requantize_counts
+from enclab.propagation.filters import (
+    DerivativeFilter,
+    apply,
+    h2_norm_sq,
+    impulse_response,
+    l1_norm,
+    settle_samples,
+)
+from enclab.propagation.kinematics import PhantomPremium15
+from enclab.propagation.moments import pooled_std_ratio
+from enclab.propagation.theory import (
     QuantizerErrorModel,
     exact_joint_autocovariance,
-    exact_operational_autocovariance,
-    sinusoid_autocovariance,
-    sinusoid_run_autocovariance,
     exact_mean_joint,
+    exact_operational_autocovariance,
     exact_std_joint,
     exact_std_joint_architecture,
     exact_std_operational,
@@ -31,6 +35,8 @@ from enclab.theory import (
     pqn_derivative_std_joint,
     pqn_position_cov,
     pqn_position_std,
+    sinusoid_autocovariance,
+    sinusoid_run_autocovariance,
     worst_case_derivative,
     worst_case_derivative_joint,
     worst_case_position,
@@ -79,7 +85,7 @@ def test_continuous_truth_moments_match_phase_average(offset_frac):
 @pytest.mark.parametrize("ratio, offset_frac", [(8, 0.5), (8, 0.0), (5, 0.5), (16, 0.3), (1, 0.5)])
 def test_quantized_truth_moments_match_residues(ratio, offset_frac):
     # Brute force: every residue of the fine count mod ratio, re-quantized with the integer
-    # formula of enclab.quantize; the error is (coarse reading - fine reading).
+    # formula of enclab.core.quantize; the error is (coarse reading - fine reading).
     truth_step = STEP / ratio
     fine = np.arange(-5 * ratio, 5 * ratio)
     err = (ratio * requantize_counts(fine, ratio, offset_frac) - fine) * truth_step

@@ -16,10 +16,9 @@ from pathlib import Path
 
 import numpy as np
 import yaml
-
-from enclab import io
+from enclab.core import atomic
 from enclab.lrde import simulate as lrde_sim
-from enclab.simulate import phantom_protocol_run
+from enclab.propagation.simulate import phantom_protocol_run
 
 ROOT = Path(__file__).resolve().parents[1]
 # Images carry no timestamps (save_figure strips them) but are compared only for existence:
@@ -92,20 +91,20 @@ def standard_workspace(work: Path) -> tuple[Path, dict]:
     entries = []
     for k in (1, 2):
         log, _ = phantom_protocol_run(np.zeros(3), np.random.default_rng(k), duration_s=3.0)
-        io.write_table(log, data / f"good{k}.parquet")
+        atomic.write_table(log, data / f"good{k}.parquet")
         entries.append(phantom_entry(f"good{k}", f"good{k}.parquet", "g"))
     bad = log.astype({"theta2_counts": float})
     bad.loc[1234, "theta2_counts"] = np.nan
     bad.to_csv(data / "bad.csv", index=False)
     entries.append(phantom_entry("bad", "bad.csv", "g") | {"format": "csv"})
     short, _ = phantom_protocol_run(np.zeros(3), np.random.default_rng(4), duration_s=0.04)
-    io.write_table(short, data / "short.parquet")
+    atomic.write_table(short, data / "short.parquet")
     entries.append(phantom_entry("short", "short.parquet", "g"))
     step = lrde_sim.ROS_DRILL_STEP
     lrde_log, lrde_params = lrde_sim.open_loop_log(np.random.default_rng(5), bias=0.1 * step,
                                                    n_cycles=8, noise_std=0.01 * step,
                                                    truth_step=step / 100)
-    io.write_table(lrde_log, data / "lrde.parquet")
+    atomic.write_table(lrde_log, data / "lrde.parquet")
     entries.append(lrde_entry("lrde", "lrde.parquet"))
     write_workspace(work, entries, fig7_group="g")
     return work, lrde_params

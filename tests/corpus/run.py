@@ -17,8 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import yaml
-
-from enclab.io import read_texts
+from enclab.core.atomic import read_texts
 from enclab.report import failure_of
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))

@@ -1,7 +1,7 @@
 """Per-log overhead of the Snakemake jobs on a batch of many small logs.
 
 Generates N simulated Phantom runs (Colonnese & Okamura protocol: 3 joints, 1 kHz, 15 s by
-default, ``enclab.simulate.phantom_protocol_run``), a manifest and a configuration in a
+default, ``enclab.propagation.simulate.phantom_protocol_run``), a manifest and a configuration in a
 temporary workspace, then measures, in one run of this script:
 
 - ``in-process``: the paper-000 stages of every log called one after the other in one Python
@@ -104,8 +104,8 @@ def _entry(log_id: str) -> dict:
 
 def make_workspace(work: Path, n: int, duration_s: float, bank: str, seed: int) -> list[str]:
     """N logs under work/logs, work/manifest.yaml and work/config.yaml; returns the log ids."""
-    from enclab import io
-    from enclab.simulate import phantom_protocol_run
+    from enclab.core import atomic
+    from enclab.propagation.simulate import phantom_protocol_run
 
     data = work / "logs"
     data.mkdir(parents=True)
@@ -115,7 +115,7 @@ def make_workspace(work: Path, n: int, duration_s: float, bank: str, seed: int) 
         rng = np.random.default_rng(stream)
         centre = rng.uniform(-0.3, 0.3, size=3)
         log, _ = phantom_protocol_run(centre, rng, duration_s=duration_s)
-        io.write_table(log, data / f"{log_id}.parquet")
+        atomic.write_table(log, data / f"{log_id}.parquet")
     (work / "manifest.yaml").write_text(yaml.safe_dump(
         {"data_root": "logs", "logs": [_entry(i) for i in ids]}))
     config = yaml.safe_load((ROOT / "config.yaml").read_text())
@@ -130,14 +130,15 @@ def make_workspace(work: Path, n: int, duration_s: float, bank: str, seed: int) 
 def in_process(work: Path, out: Path, share: int = 0, shares: int = 1) -> None:
     """Every log's stages in this one Python (called in a child process by :func:`main`), or
     the ``share``-th of ``shares`` contiguous parts of the logs."""
-    from enclab import io, manifest, stages
+    from enclab import stages
+    from enclab.core import manifest, readers
     from enclab.runner import run_chunk
 
     config = yaml.safe_load((work / "config.yaml").read_text())
     schema = yaml.safe_load((ROOT / "workflow/schemas/config.schema.yaml").read_text())
     manifest.check_document(config, schema, "config", "config.schema.yaml")
     os.chdir(work)
-    data_root, entries = io.read_manifest(config["manifest"], devices=config["devices"])
+    data_root, entries = readers.read_manifest(config["manifest"], devices=config["devices"])
     size = math.ceil(len(entries) / shares)
     entries = entries[share * size:(share + 1) * size]
     status = run_chunk(entries, lambda e, folder: stages.quantization_log(e, folder, config,

@@ -37,17 +37,17 @@ def main(argv=None) -> None:
     ap.add_argument("--out", default=str(ROOT / "results" / "benchmarks"))
     args = ap.parse_args(argv)
     import enclab
-    from enclab import io
+    from enclab.core import ingest, readers
     from enclab.lrde.pipeline import analyse_lrde_log
 
     config = yaml.safe_load(pathlib.Path(args.config).read_text())
     devices = config.get("devices") or {}
-    data_root, entries = io.read_manifest(args.manifest, devices)
+    data_root, entries = readers.read_manifest(args.manifest, devices)
     rows = []
     for entry in entries:
         if "lrde" not in ((entry.get("analysis") or {}).get("stages") or []):
             continue
-        df, meta = io.ingest_log(entry, data_root, devices)
+        df, meta = ingest.ingest_log(entry, data_root, devices)
         settings = dict(config.get("lrde") or {})
         settings.update((entry.get("analysis") or {}).get("lrde") or {})
         seed = [int(settings.pop("seed", 0)), zlib.crc32(meta["log_id"].encode())]

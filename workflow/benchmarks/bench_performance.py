@@ -3,16 +3,16 @@
 In ONE run this script
 
 1. generates (once; reused when present) a long and a small simulated 7-joint Franka Panda log
-   at 10 kHz (:func:`enclab.stream.franka_motion_chunks`, Parquet row groups of 1e6 rows,
+   at 10 kHz (:func:`enclab.propagation.stream.franka_motion_chunks`, Parquet row groups of 1e6 rows,
    under ``results/benchmarks/``; never commit them);
 2. section ``stages``, small log, in a child process: median of ``--reps`` repetitions of
    ``pyarrow.parquet.read_table`` and of each in-memory stage function the rules call
-   (``requantize``, ``kinematics``, ``derivatives``, ``moments``: :mod:`enclab.analysis`,
-   without their file I/O) and of the streamed moments (:func:`enclab.stream.empirical_rows`,
+   (``requantize``, ``kinematics``, ``derivatives``, ``moments``: :mod:`enclab.propagation.analysis`,
+   without their file I/O) and of the streamed moments (:func:`enclab.propagation.stream.empirical_rows`,
    all stages from the file);
 3. section ``stream``, long log, each in its own child process: ``read_table`` of the whole
    file (median of ``--reps``; pyarrow decodes with every CPU), a streamed read that only
-   decodes the pieces, and the streamed analysis end to end (``python -m enclab.stream
+   decodes the pieces, and the streamed analysis end to end (``python -m enclab.propagation.stream
    moments``, once per ``--workers`` value: it is the long case), with its time per stage
    (summed over its worker processes).
 
@@ -85,8 +85,8 @@ def _config() -> dict:
 
 
 def _bank(config: dict, which: str):
-    from enclab import analysis
-    from enclab import filters as flt
+    from enclab.propagation import analysis
+    from enclab.propagation import filters as flt
 
     if which == "config":
         return analysis.filter_bank(config["derivatives"])
@@ -113,12 +113,11 @@ def worker_read(path: str, reps: int, chunk_rows: int) -> dict:
     """Whole-file ``read_table`` (median of reps) or, with ``chunk_rows > 0``, a streamed
     read that decodes every piece to pandas and drops it."""
     import pyarrow.parquet as pq
-
-    from enclab import io
+    from enclab.core import canonical
 
     if chunk_rows > 0:
         def once():
-            _, _, pieces = io.iter_canonical(path, batch_rows=chunk_rows)
+            _, _, pieces = canonical.iter_canonical(path, batch_rows=chunk_rows)
             return sum(len(p) for p in pieces)
     else:
         def once():
@@ -130,15 +129,15 @@ def worker_read(path: str, reps: int, chunk_rows: int) -> dict:
 def worker_stages(path: str, reps: int, bank_name: str, chunk_rows: int) -> dict:
     """In-memory stage functions on the small log (median of reps each)."""
     import pyarrow.parquet as pq
-
-    from enclab import analysis, io, stream
+    from enclab.core import canonical
+    from enclab.propagation import analysis, stream
 
     config = _config()
     derivatives, moments = config["derivatives"], config["moments"]
     bank = _bank(config, bank_name)
     out = {}
     out["read"], _ = _median_time(lambda: pq.read_table(path), reps)
-    df, meta = io.read_canonical(path)
+    df, meta = canonical.read_canonical(path)
     levels = analysis.plan_levels(meta, config["requantize"])
     out["requantize"], req = _median_time(lambda: analysis.requantize(df, meta, levels), reps)
     out["kinematics"], kin = _median_time(
@@ -151,7 +150,7 @@ def worker_stages(path: str, reps: int, bank_name: str, chunk_rows: int) -> dict
         n_batches=moments["n_batches"]), reps)
 
     def streamed():
-        m, _, pieces = io.iter_canonical(path, batch_rows=chunk_rows)
+        m, _, pieces = canonical.iter_canonical(path, batch_rows=chunk_rows)
         return stream.empirical_rows(pieces, m, levels, bank, derivatives["architectures"],
                                      settle_tol=derivatives["settle_tol"],
                                      ci_level=moments["ci_level"],
@@ -181,10 +180,11 @@ def _child(args: list[str]) -> tuple[dict, float]:
 
 def ensure_log(path: pathlib.Path, duration_s: float, fs_hz: float, seed: int) -> float:
     """Generate the log unless a file with the same parameters exists; returns seconds."""
-    from enclab import io, stream
+    from enclab.core import canonical
+    from enclab.propagation import stream
 
     if path.exists():
-        meta, _, _ = io.iter_canonical(path)
+        meta, _, _ = canonical.iter_canonical(path)
         params = (meta.get("source") or {}).get("params") or {}
         if params.get("duration_s") == duration_s and params.get("fs_hz") == fs_hz and \
                 params.get("seed") == seed:
@@ -192,7 +192,7 @@ def ensure_log(path: pathlib.Path, duration_s: float, fs_hz: float, seed: int) -
     t0 = time.perf_counter()
     meta, chunks = stream.franka_motion_chunks(duration_s, fs_hz, seed, chunk_rows=1_000_000,
                                                log_id=path.stem)
-    io.write_canonical_chunks(chunks, meta, path)
+    canonical.write_canonical_chunks(chunks, meta, path)
     return time.perf_counter() - t0
 
 
@@ -241,7 +241,7 @@ def run_stream(long: pathlib.Path, args) -> list[dict]:
     for workers in args.workers:
         with tempfile.TemporaryDirectory(dir=OUT_DIR) as tmp:
             timings = pathlib.Path(tmp) / "timings.json"
-            cmd = [sys.executable, "-m", "enclab.stream", "moments", str(long),
+            cmd = [sys.executable, "-m", "enclab.propagation.stream", "moments", str(long),
                    str(pathlib.Path(tmp) / "moments.json"), "--configfile",
                    str(ROOT / "config.yaml"), "--bank", args.long_bank, "--chunk-rows",
                    str(args.chunk_rows), "--workers", str(workers), "--timings", str(timings)]
@@ -261,7 +261,7 @@ def run_stream(long: pathlib.Path, args) -> list[dict]:
             target=f"ratio <= {TARGET_RATIO:g}; peak <= {TARGET_RSS_MB:g} MB",
             met=f"time {'yes' if wall <= TARGET_RATIO * read_s else 'no'}; "
                 f"memory {'yes' if rss <= TARGET_RSS_MB else 'no'}",
-            notes=f"python -m enclab.stream moments --workers {workers}, bank={args.long_bank} "
+            notes=f"python -m enclab.propagation.stream moments --workers {workers}, bank={args.long_bank} "
                   f"({t['n_filters']} filters, {t['n_levels']} levels, {t['n_rows']} rows), "
                   f"chunk {args.chunk_rows}; wall time incl. interpreter start; peak = sum of "
                   f"the processes' own peaks when there are workers"))

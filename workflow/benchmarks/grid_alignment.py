@@ -35,8 +35,8 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-
-from enclab import filters, quantize, theory
+from enclab.core import quantize
+from enclab.propagation import filters, theory
 
 FS = 1000.0
 TRUTH_STEP = 1.25e-4
@@ -118,7 +118,7 @@ def main(argv=None) -> None:
                      "mean": float(curves[..., k].mean()), "sd": float(curves[..., k].std(ddof=1)),
                      "min": float(curves[..., k].min()), "max": float(curves[..., k].max())})
 
-    # 2. pooled groups: sqrt(mean variance ratio) over the runs of a group, as enclab.batch pools
+    # 2. pooled groups: sqrt(mean variance ratio) over the runs of a group, as enclab.propagation.batch pools
     for kind in ("aligned", "uniform", "stratified", "systematic"):
         pooled = []
         for _ in range(args.pools):

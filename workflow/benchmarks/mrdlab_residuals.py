@@ -43,12 +43,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import yaml
-from scipy import optimize
-
-from enclab import io
+from enclab.core import atomic, ingest, readers
 from enclab.residuals import diagnostics as dg
-from enclab.residuals.pipeline import channel_values
 from enclab.residuals.effects import play_operator
+from enclab.residuals.pipeline import channel_values
+from scipy import optimize
 
 ROOT = Path(__file__).resolve().parents[2]
 TORQUE_STEP = 3.9811e-5  # N m per Futek count (PROVENANCE.md)
@@ -104,7 +103,7 @@ def analyse_run(path: Path, entry: dict, devices: dict, channels=("theta_cui", "
     entry = copy.deepcopy(entry)
     entry["file"] = str(path.relative_to(ROOT.parent / "shared" / "data" / "real"))
     root = ROOT.parent / "shared" / "data" / "real"
-    df, meta = io.ingest_log(entry, root, devices)
+    df, meta = ingest.ingest_log(entry, root, devices)
     header = path.read_text(errors="replace").splitlines()[1]
     freq = float(re.search(r"([\d.]+) Hz", header).group(1))
     load = float(re.search(r"reaction torque of ([\d.]+) percent", header).group(1))
@@ -208,7 +207,7 @@ def main(argv=None) -> int:
         return 1
     config = yaml.safe_load((ROOT / "config.yaml").read_text())
     manifest = yaml.safe_load((ROOT / "data" / "manifest.real.yaml").read_text())
-    _, entries = io.read_manifest(ROOT / "data" / "manifest.real.yaml", devices=config["devices"])
+    _, entries = readers.read_manifest(ROOT / "data" / "manifest.real.yaml", devices=config["devices"])
     entry = next(e for e in entries if e["id"] == "mrdlab_0p5hz")
     del manifest
     files = sorted(data.glob("*.TXT")) if args.all else [data / "40.TXT"]
@@ -220,8 +219,8 @@ def main(argv=None) -> int:
         print(f"{path.name}: {time.perf_counter() - start:.1f} s", file=sys.stderr)
     table = pd.DataFrame(rows)
     args.out.mkdir(parents=True, exist_ok=True)
-    io.write_table(table, args.out / "mrdlab_models.csv")
-    io.write_text(markdown(table), args.out / "mrdlab_residuals.md")
+    atomic.write_table(table, args.out / "mrdlab_models.csv")
+    atomic.write_text(markdown(table), args.out / "mrdlab_residuals.md")
     print(markdown(table))
     return 0
 

@@ -39,12 +39,11 @@ import pandas as pd
 import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import stamp  # noqa: E402
-
-from enclab import io  # noqa: E402
+from enclab.core import atomic, ingest, readers  # noqa: E402
 from enclab.residuals import rig  # noqa: E402
 from enclab.residuals.rig_manifest import rig_groups  # noqa: E402
 from enclab.residuals.rig_report import remains, split_table  # noqa: E402
+from provenance import stamp  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 RIG = "mrdlab_tool4"
@@ -65,13 +64,13 @@ STUDY = {("play+scale", "frequency"): (1.56e-3, 1.89e-3), ("+map", "frequency"):
 
 def load_runs() -> tuple[list[rig.Run], list[dict]]:
     config = yaml.safe_load((ROOT / "config.yaml").read_text())
-    data_root, entries = io.read_manifest(ROOT / "data" / "manifest.real.yaml", devices=config["devices"])
+    data_root, entries = readers.read_manifest(ROOT / "data" / "manifest.real.yaml", devices=config["devices"])
     group = rig_groups(entries)[RIG]
     by_id = {e["id"]: e for e in entries}
     pair = group["pairs"][0]
     runs = []
     for member in group["runs"]:
-        df, meta = io.ingest_log(by_id[member["log_id"]], ROOT / data_root, config["devices"])
+        df, meta = ingest.ingest_log(by_id[member["log_id"]], ROOT / data_root, config["devices"])
         runs.append(rig.run_from_canonical(df, meta, pair["measured"], pair["truth"], list(COMP),
                                            member["conditions"], member["log_id"]))
     return runs, group["splits"]
@@ -158,7 +157,7 @@ def main(argv=None) -> int:
     outputs = {f"mrdlab_rig{args.suffix}.csv": pd.DataFrame(rows),
                f"mrdlab_rig_params{args.suffix}.csv": pd.DataFrame(params)}
     for name, frame in outputs.items():
-        io.write_table(stamp(frame), args.out / name)
+        atomic.write_table(stamp(frame), args.out / name)
         if args.copy_to:
             args.copy_to.mkdir(parents=True, exist_ok=True)
             shutil.copy(args.out / name, args.copy_to / name)

@@ -35,8 +35,8 @@ import numpy as np
 import pandas as pd
 import scipy.stats
 import yaml
-
-from enclab import analysis, filters, quantize, theory
+from enclab.core import quantize
+from enclab.propagation import analysis, filters, theory
 
 FS = 1000.0
 TRUTH_STEP = 1.25e-4

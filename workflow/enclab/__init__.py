@@ -1,21 +1,21 @@
-"""enclab: quantization error of logged encoder experiments.
+"""enclab: logged encoder experiments, from the log to the answer.
 
 All scientific logic lives in this package; Snakemake rules and scripts are thin adapters.
-Modules (one concern each):
+Subpackages (each with its entry points in its docstring):
 
-- :mod:`enclab.quantize`   encoder/quantizer model on integer counts
-- :mod:`enclab.filters`    derivative estimators of Colonnese & Okamura Fig. 5 and their norms
-- :mod:`enclab.kinematics` devices: forward kinematics and Jacobians
-- :mod:`enclab.theory`     Table II (worst case, PQN), exact non-white model, trajectory bound
-- :mod:`enclab.moments`    empirical error moments with confidence intervals
-- :mod:`enclab.ingest`     pure conversions of raw logs (units, counters, time base)
-- :mod:`enclab.manifest`   manifest/config validation and normalisation
-- :mod:`enclab.io`         the only module that touches disk
-- :mod:`enclab.simulate`   simulated lab logs (Phantom Premium protocol)
-- :mod:`enclab.analysis`   per-log stage functions used by the workflow scripts
-- :mod:`enclab.stream`     the moments of logs too long for memory, piece by piece (CLI)
-- :mod:`enclab.plots`      figures (return matplotlib Figures; scripts save them)
-- :mod:`enclab.lrde`       extreme low-resolution encoder (Zhang & Gao): model, dwell, emcee fit
+- :mod:`enclab.core`         shared: errors, manifest, readers, ingest, canonical log, atomic
+  writes, the quantizer; imports no analysis
+- :mod:`enclab.propagation`  paper 000 (Colonnese & Okamura): quantization error of positions,
+  velocities and accelerations, measured, predicted (Table II, exact model) and bounded
+- :mod:`enclab.lrde`         paper 002 (Zhang & Gao): extreme low-resolution encoder, offset and
+  bias from dwell patterns (emcee)
+- :mod:`enclab.residuals`    what the exact model misses on a measured channel, and which effect
+  explains it
+- :mod:`enclab.design`       encoder resolution and derivative filter for an error budget
+
+Workflow glue: :mod:`enclab.stages` (per-log stages), :mod:`enclab.runner` (script runner),
+:mod:`enclab.report` (run summary), :mod:`enclab.progress` (progress lines), :mod:`enclab.cli`
+(the ``enclab`` command).
 """
 from __future__ import annotations
 

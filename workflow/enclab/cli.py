@@ -27,9 +27,10 @@ from pathlib import Path
 import yaml
 
 import enclab
-from enclab import io, report
-from enclab.errors import EnclabInputError
-from enclab.manifest import validate_manifest
+from enclab import report
+from enclab.core import atomic
+from enclab.core.errors import EnclabInputError
+from enclab.core.manifest import validate_manifest
 
 __all__ = ["COMMANDS", "EXTERNAL_COMMANDS", "build_entry", "main"]
 
@@ -129,8 +130,8 @@ def _write_workspace(entry: dict, data_root: Path, out: Path, configfile: Path) 
     manifest = {"data_root": str(data_root), "logs": [entry]}
     # the entry is checked here, before Snakemake starts
     validate_manifest(manifest, config.get("devices") or {}, f"enclab {entry['id']}")
-    io.write_text(yaml.safe_dump(manifest, sort_keys=False), out / "manifest.yaml")
-    io.write_text(yaml.safe_dump(config, sort_keys=False), out / "config.yaml")
+    atomic.write_text(yaml.safe_dump(manifest, sort_keys=False), out / "manifest.yaml")
+    atomic.write_text(yaml.safe_dump(config, sort_keys=False), out / "config.yaml")
 
 
 def _results_listing(out: Path, log_id: str) -> list[str]:
@@ -182,7 +183,7 @@ def _run_analysis(command: str, args: argparse.Namespace) -> int:
         print(f"==> enclab {command}: log '{entry['id']}' completed, but the run failed after it "
               "(messages above)", file=sys.stderr)
         return 1
-    failure = report.failure_of(io.read_texts(out / "results" / entry["id"] / "logs", "*.log"))
+    failure = report.failure_of(atomic.read_texts(out / "results" / entry["id"] / "logs", "*.log"))
     print(f"==> enclab {command}: log '{entry['id']}' failed [{failure['stage']}]: "
           f"{failure['error']}", file=sys.stderr)
     return 1

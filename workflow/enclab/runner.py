@@ -1,10 +1,10 @@
 """Run pipeline work: log to the rule's log file, turn bad input into one clear line.
 
 Every ``scripts/<rule>.py`` ends with ``run(snakemake, main)``. A user-fixable problem
-(:class:`enclab.errors.EnclabInputError`, or a ``ValueError`` raised while checking a log's
+(:class:`enclab.core.errors.EnclabInputError`, or a ``ValueError`` raised while checking a log's
 contents) is printed as a single line naming the log, and the job exits non-zero, so that
 ``snakemake --keep-going`` finishes every other log. Outputs are written atomically by
-:mod:`enclab.io`, and Snakemake removes the outputs of a failed job, so nothing partial stays.
+:mod:`enclab.core.atomic`, and Snakemake removes the outputs of a failed job, so nothing partial stays.
 
 :func:`run_chunk` does the same for several logs inside one job (the chunked mode of
 ``workflow/rules/chunks.smk``): each log gets its own log file, a failing log is recorded
@@ -21,8 +21,8 @@ from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
-from enclab import io
-from enclab.errors import EnclabInputError
+from enclab.core import atomic
+from enclab.core.errors import EnclabInputError
 from enclab.progress import QUIET_JOBS_ENV
 
 __all__ = ["run", "run_chunk", "error_line"]
@@ -122,7 +122,7 @@ def run_chunk(entries: Iterable[Mapping], process: Callable[[Mapping, Path], Non
         root.addHandler(handler)
         start, cpu = time.perf_counter(), time.process_time()
         try:
-            with io.atomic_folder(staging / log_id) as tmp:
+            with atomic.atomic_folder(staging / log_id) as tmp:
                 process(entry, tmp)
         except Exception as err:  # noqa: BLE001 - whatever fails one log fails it alone
             line = error_line(err)
@@ -132,7 +132,7 @@ def run_chunk(entries: Iterable[Mapping], process: Callable[[Mapping, Path], Non
                 logger.error("%s", line)
             else:
                 logger.error("[%s] %s", log_id, line)
-            io.write_text(line + "\n", staging / f"{log_id}.failed")
+            atomic.write_text(line + "\n", staging / f"{log_id}.failed")
             status[log_id] = line
         else:
             logger.info("[%s] done in %.2f s, %.2f s CPU", log_id, time.perf_counter() - start,

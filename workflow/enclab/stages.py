@@ -1,7 +1,7 @@
 """The per-log quantization stages as file-to-file steps, shared by both execution modes.
 
-Each function reads its inputs with :mod:`enclab.io`, calls :mod:`enclab.analysis` and writes
-its output with :mod:`enclab.io` (atomically). The rule scripts (``scripts/<rule>.py``, one
+Each function reads its inputs with :mod:`enclab.core.canonical` and :mod:`enclab.core.atomic`,
+calls :mod:`enclab.propagation.analysis` and writes its output with :mod:`enclab.core.atomic`. The rule scripts (``scripts/<rule>.py``, one
 Snakemake job per stage and log) and the chunked mode (:func:`quantization_log`, every stage
 of several logs in one job, see ``workflow/rules/chunks.smk``) call the same functions in the
 same order on the same files, so both modes write byte-identical outputs.
@@ -14,9 +14,11 @@ import os
 from collections.abc import Mapping
 from pathlib import Path
 
-from enclab import analysis, io
-from enclab import filters as flt
-from enclab.errors import EnclabInputError
+from enclab.core import atomic, canonical
+from enclab.core.errors import EnclabInputError
+from enclab.core.ingest import ingest_log
+from enclab.propagation import analysis
+from enclab.propagation import filters as flt
 from enclab.residuals.pipeline import summary_block as residual_summary_block
 
 __all__ = [
@@ -59,10 +61,10 @@ _LOG = logging.getLogger("enclab.stages")
 
 def ingest(entry: Mapping, data_root: PathLike, devices: Mapping, canonical: PathLike) -> None:
     """One manifest entry -> the canonical Parquet log (its warnings are logged too)."""
-    df, meta = io.ingest_log(entry, data_root, devices)
+    df, meta = ingest_log(entry, data_root, devices)
     for line in meta.get("warnings") or []:
         _LOG.warning("[%s] %s", meta["log_id"], line)
-    io.write_canonical(df, meta, canonical)
+    canonical.write_canonical(df, meta, canonical)
 
 
 @functools.lru_cache(maxsize=64)
@@ -74,7 +76,7 @@ def _filter_memory(fs: float, bank: tuple) -> int:
 
 
 def check_cutoffs(settings: Mapping, meta: Mapping) -> None:
-    """The log suits the derivative filters: :func:`enclab.analysis.check_cutoffs`, and longer
+    """The log suits the derivative filters: :func:`enclab.propagation.analysis.check_cutoffs`, and longer
     than the longest filter memory (the theory stage's own check, made before the moments stage
     too, so that every stage names the same fix). When the log's time base is implausible, the
     error names that fix instead (a cutoff above Nyquist is then its symptom)."""
@@ -100,49 +102,49 @@ def check_cutoffs(settings: Mapping, meta: Mapping) -> None:
 def requantize(canonical: PathLike, settings: Mapping, requantized: PathLike) -> None:
     """Truth channels -> integer counts at every level (``settings``: ``config["requantize"]``,
     updated with the log's own ``analysis.requantize``)."""
-    df, meta = io.read_canonical(canonical)
+    df, meta = canonical.read_canonical(canonical)
     merged = dict(settings)
     merged.update((meta.get("analysis") or {}).get("requantize") or {})
     levels = analysis.plan_levels(meta, merged)
     meta = dict(meta, levels=levels)
-    io.write_canonical(analysis.requantize(df, meta, levels), meta, requantized)
+    canonical.write_canonical(analysis.requantize(df, meta, levels), meta, requantized)
 
 
 def kinematics(requantized: PathLike, out: PathLike) -> None:
     """Operational positions of truth and levels, Jacobian at the truth."""
-    req, meta = io.read_canonical(requantized)
-    io.write_canonical(analysis.kinematics_table(req, meta, meta["levels"]), meta, out)
+    req, meta = canonical.read_canonical(requantized)
+    canonical.write_canonical(analysis.kinematics_table(req, meta, meta["levels"]), meta, out)
 
 
 def derivatives(requantized: PathLike, settings: Mapping, export: list, out: PathLike) -> None:
     """The exported derivative estimators (``settings``: ``config["derivatives"]``)."""
-    req, meta = io.read_canonical(requantized)
+    req, meta = canonical.read_canonical(requantized)
     check_cutoffs(settings, meta)
-    io.write_canonical(analysis.export_derivatives(req, meta, meta["levels"], export), meta, out)
+    canonical.write_canonical(analysis.export_derivatives(req, meta, meta["levels"], export), meta, out)
 
 
 def moments(requantized: PathLike, kinematics_path: PathLike, settings: Mapping,
             moment_settings: Mapping, out: PathLike) -> None:
     """Empirical error moments over the whole derivative-filter bank."""
-    req, meta = io.read_canonical(requantized)
-    kin, _ = io.read_canonical(kinematics_path)
+    req, meta = canonical.read_canonical(requantized)
+    kin, _ = canonical.read_canonical(kinematics_path)
     check_cutoffs(settings, meta)
     rows = analysis.empirical_rows(
         req, kin, meta, meta["levels"], analysis.filter_bank(settings),
         settings["architectures"], settle_tol=settings["settle_tol"],
         ci_level=moment_settings["ci_level"], n_batches=moment_settings["n_batches"])
-    io.write_json({"log_id": meta["log_id"], "rows": rows}, out)
+    atomic.write_json({"log_id": meta["log_id"], "rows": rows}, out)
 
 
 def theory(requantized: PathLike, kinematics_path: PathLike, settings: Mapping,
            out: PathLike) -> None:
     """Table II, the exact model and the trajectory worst case for every row."""
-    req, meta = io.read_canonical(requantized)
-    kin, _ = io.read_canonical(kinematics_path)
+    req, meta = canonical.read_canonical(requantized)
+    kin, _ = canonical.read_canonical(kinematics_path)
     check_cutoffs(settings, meta)
     rows = analysis.theory_rows(req, kin, meta, meta["levels"], analysis.filter_bank(settings),
                                 settings["architectures"], settle_tol=settings["settle_tol"])
-    io.write_json({"log_id": meta["log_id"], "rows": rows}, out)
+    atomic.write_json({"log_id": meta["log_id"], "rows": rows}, out)
 
 
 def summary(inputs: Mapping[str, PathLike], out: PathLike) -> None:
@@ -155,23 +157,23 @@ def summary(inputs: Mapping[str, PathLike], out: PathLike) -> None:
     motion-model comparison of its ``lrde`` block (:mod:`enclab.lrde.compare`).
     """
     if "moments" in inputs:
-        req, meta = io.read_canonical(inputs["requantized"])
+        req, meta = canonical.read_canonical(inputs["requantized"])
         block = analysis.build_summary(
-            meta, meta["levels"], io.read_json(inputs["moments"])["rows"],
-            io.read_json(inputs["theory"])["rows"], analysis.centre_of(req, meta))
+            meta, meta["levels"], atomic.read_json(inputs["moments"])["rows"],
+            atomic.read_json(inputs["theory"])["rows"], analysis.centre_of(req, meta))
     else:
-        _, meta = io.read_canonical(inputs["canonical"])
+        _, meta = canonical.read_canonical(inputs["canonical"])
         block = analysis.log_header(meta)
     block["warnings"] = list(meta.get("warnings") or [])
     if "lrde" in inputs:
-        block["lrde"] = io.read_json(inputs["lrde"])
+        block["lrde"] = atomic.read_json(inputs["lrde"])
     if "residuals" in inputs:
         paths = inputs["residuals"]
         paths = [paths] if isinstance(paths, (str, os.PathLike)) else list(paths)
-        block["residuals"] = residual_summary_block([io.read_json(p) for p in paths])
+        block["residuals"] = residual_summary_block([atomic.read_json(p) for p in paths])
     elif (block.get("lrde") or {}).get("residuals"):
         block["residuals"] = block["lrde"]["residuals"]
-    io.write_json(block, out)
+    atomic.write_json(block, out)
 
 
 def log_figures(inputs: Mapping[str, PathLike], export: list, settle_tol: float,
@@ -181,23 +183,23 @@ def log_figures(inputs: Mapping[str, PathLike], export: list, settle_tol: float,
     ``inputs`` holds ``requantized``, ``kinematics``, ``derivatives`` and ``summary``;
     ``export`` and ``settle_tol`` are ``config["derivatives"]`` keys.
     """
-    from enclab import plots  # matplotlib: only jobs that draw import it
+    from enclab.propagation import plots  # matplotlib: only jobs that draw import it
 
-    req, meta = io.read_canonical(inputs["requantized"])
-    kin, _ = io.read_canonical(inputs["kinematics"])
-    deriv, _ = io.read_canonical(inputs["derivatives"])
-    summary_block = io.read_json(inputs["summary"])
+    req, meta = canonical.read_canonical(inputs["requantized"])
+    kin, _ = canonical.read_canonical(inputs["kinematics"])
+    deriv, _ = canonical.read_canonical(inputs["derivatives"])
+    summary_block = atomic.read_json(inputs["summary"])
     level = meta["levels"][0]["label"]
     tr = analysis.error_traces(req, kin, deriv, meta, level, export, settle_tol)
     title = f"{meta['log_id']}: {tr['signal']} error at {level}"
-    io.save_figure(plots.error_trace_figure(tr["t"], tr["errors"], title, tr["unit"],
+    atomic.save_figure(plots.error_trace_figure(tr["t"], tr["errors"], title, tr["unit"],
                                             step=tr["step"]), errors)
     table = analysis.summary_table(summary_block)
     truth = analysis.truth_channels(meta)[0]
     native = truth.get("step") or truth.get("native_step")
     fig = plots.real_log_figure(table, f"{meta['log_id']}: measured vs theory",
                                 native_step=native, step_unit=truth["unit"])
-    io.save_figure(fig, comparison)
+    atomic.save_figure(fig, comparison)
 
 
 def quantization_log(entry: Mapping, folder: PathLike, config: Mapping,

@@ -9,9 +9,9 @@ from snakemake.logging import logger
 from snakemake.utils import validate
 
 import enclab
-from enclab import io as enclab_io
-from enclab import manifest as enclab_manifest
-from enclab.errors import EnclabInputError
+from enclab.core import readers as enclab_readers
+from enclab.core import manifest as enclab_manifest
+from enclab.core.errors import EnclabInputError
 from enclab.residuals.pipeline import residual_pairs as enclab_residual_pairs
 from enclab.residuals.rig_manifest import rig_groups as enclab_rig_groups
 
@@ -27,7 +27,7 @@ except EnclabInputError as err:
 validate(config, schema="../schemas/config.schema.yaml")
 
 try:
-    DATA_ROOT, MANIFEST = enclab_io.read_manifest(config["manifest"], devices=config["devices"])
+    DATA_ROOT, MANIFEST = enclab_readers.read_manifest(config["manifest"], devices=config["devices"])
 except EnclabInputError as err:
     raise WorkflowError(str(err)) from None
 
@@ -123,14 +123,14 @@ wildcard_constraints:
 def raw_inputs(wildcards):
     # A missing file is left out so that ingest runs and fails for this log alone with a
     # clear message (a missing input would stop Snakemake from building the whole DAG).
-    files = enclab_io.entry_files(ENTRIES[wildcards.log_id], DATA_ROOT)
+    files = enclab_readers.entry_files(ENTRIES[wildcards.log_id], DATA_ROOT)
     return [f for f in files if os.path.exists(f)]
 
 
 def chunk_raw_inputs(wildcards):
     """The existing data files of every log in a chunk (see raw_inputs)."""
     return [f for i in CHUNKS[wildcards.chunk]
-            for f in enclab_io.entry_files(ENTRIES[i], DATA_ROOT) if os.path.exists(f)]
+            for f in enclab_readers.entry_files(ENTRIES[i], DATA_ROOT) if os.path.exists(f)]
 
 
 def entry_of(wildcards):

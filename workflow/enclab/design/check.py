@@ -17,8 +17,8 @@ from collections.abc import Mapping
 import numpy as np
 import pandas as pd
 
-from enclab import filters as flt
 from enclab.design.problem import DesignProblem
+from enclab.propagation import filters as flt
 
 __all__ = ["random_trajectories", "simulate", "summarize"]
 

@@ -34,14 +34,14 @@ def load_trajectory(config: dict) -> "object | None":
     log_id = (config["design"].get("workspace") or {}).get("log")
     if log_id is None:
         return None
-    from enclab import io
+    from enclab.core import ingest, readers
     from enclab.design.pipeline import truth_trajectory
 
-    data_root, manifest = io.read_manifest(config["manifest"], devices=config.get("devices") or {})
+    data_root, manifest = readers.read_manifest(config["manifest"], devices=config.get("devices") or {})
     entries = {e["id"]: e for e in manifest}
     if log_id not in entries:
         raise ValueError(f"design.workspace.log {log_id!r} is not a log of {config['manifest']}")
-    df, meta = io.ingest_log(entries[log_id], data_root, config.get("devices") or {})
+    df, meta = ingest.ingest_log(entries[log_id], data_root, config.get("devices") or {})
     return truth_trajectory(df, meta)
 
 
@@ -51,8 +51,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--out", default="results/design", help="output folder (default results/design)")
     parser.add_argument("--trajectories", type=int, help="override design.check.trajectories (0: no check)")
     args = parser.parse_args(argv)
-    from enclab import io
-    from enclab.errors import EnclabInputError
+    from enclab.core import atomic
+    from enclab.core.errors import EnclabInputError
 
     try:
         config = _read_config(args.configfile)
@@ -67,9 +67,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"error: {' '.join(str(exc).split())}", file=sys.stderr)
         return 1
     out = Path(args.out)
-    io.write_json(block, out / "design.json")
-    io.write_table(table, out / "designs.csv")
-    io.save_figure(figure, out / "pareto.png")
+    atomic.write_json(block, out / "design.json")
+    atomic.write_table(table, out / "designs.csv")
+    atomic.save_figure(figure, out / "pareto.png")
     chosen = block["design"]["chosen"]
     summary = {"chosen": None if chosen is None else {
         "resolution": chosen["resolution"], "filters": [f["label"] for f in chosen["filters"]],

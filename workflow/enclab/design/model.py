@@ -4,8 +4,8 @@ Everything the search needs is split along the structure of the problem:
 
 * **per joint, per candidate step, per filter** (no workspace): the variance of the filtered
   quantization error of one joint, from the exact model of a sampled sinusoid
-  (:func:`enclab.theory.sinusoid_autocovariance`, averaged over the grid phase, and
-  :func:`enclab.theory.sinusoid_run_autocovariance`, the worst grid phase of one run),
+  (:func:`enclab.propagation.theory.sinusoid_autocovariance`, averaged over the grid phase, and
+  :func:`enclab.propagation.theory.sinusoid_run_autocovariance`, the worst grid phase of one run),
   and the PQN value ``step^2/12 ||h||_2^2``;
 * **per workspace point, no step, no filter**: the Jacobian weights ``mean J_ji^2`` over the
   local motion (operational-space variance is linear in them: ``var_j = sum_i W_ji V_i``),
@@ -22,10 +22,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from enclab import filters as flt
-from enclab import theory as th
-from enclab.analysis import third_derivative_bound
 from enclab.design.problem import DesignProblem
+from enclab.propagation import filters as flt
+from enclab.propagation import theory as th
+from enclab.propagation.analysis import third_derivative_bound
 
 __all__ = ["Candidate", "JointTerms", "WorkspaceTerms", "candidates", "joint_terms",
            "workspace_terms", "motion_phases"]
@@ -212,7 +212,7 @@ def workspace_terms(problem: DesignProblem, cands: list[Candidate] | None = None
     :meth:`DesignProblem.bound_grid`,
     ``|J_ji| <= |J_ji(b)| + sum_l |H_jil(b)| rho_l + T (sum rho)^2/2`` and
     ``|H_jil| <= |H_jil(b)| + T sum rho`` (Taylor with the Lagrange remainder, ``T`` the
-    third-derivative bound of :func:`enclab.analysis.third_derivative_bound`), so the worst
+    third-derivative bound of :func:`enclab.propagation.analysis.third_derivative_bound`), so the worst
     case built from them holds at every sample of every trajectory inside the box.
     """
     device = problem.device

@@ -12,12 +12,12 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from enclab.analysis import truth_channels
 from enclab.design import check as chk
 from enclab.design.lrde import lrde_design
 from enclab.design.plots import pareto_figure
 from enclab.design.problem import problem_from_config
 from enclab.design.search import SearchResult, design_rows, search
+from enclab.propagation.analysis import truth_channels
 
 __all__ = ["run_design", "design_table", "truth_trajectory"]
 

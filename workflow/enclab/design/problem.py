@@ -20,8 +20,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from enclab import filters as flt
-from enclab.kinematics import Device, make_device
+from enclab.propagation import filters as flt
+from enclab.propagation.kinematics import Device, make_device
 
 __all__ = [
     "ARCHITECTURES",

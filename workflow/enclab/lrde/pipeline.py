@@ -7,7 +7,7 @@ Channel selection (canonical log contract, ``docs/architecture.md``):
 - truth channel: the first channel with role ``"truth"`` (same joint as the measured one when
   several); its angle is ``counts * step`` (counts storage) or the float column (rad);
 - no measured channel but ``settings["requantize"] = {"step": s, "offset_frac": f}``: the
-  truth is re-quantized with :func:`enclab.quantize.quantize` (``floor(theta/s + f)``) and
+  truth is re-quantized with :func:`enclab.core.quantize.quantize` (``floor(theta/s + f)``) and
   becomes the measured channel.
 
 With a truth channel (and ``settings["use_truth"]``, default True) the fit reports the offset
@@ -133,7 +133,7 @@ def select_channels(df: pd.DataFrame, meta: dict, settings: dict):
     if truth is None or not req:
         raise ValueError("the log has no measured counts channel; give settings['requantize'] "
                          "= {'step': ..., 'offset_frac': ...} and a truth channel")
-    from enclab.quantize import quantize
+    from enclab.core.quantize import quantize
 
     if "step" not in req:
         raise ValueError(f"settings['requantize'] needs 'step', got {req!r}")

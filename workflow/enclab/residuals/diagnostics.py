@@ -26,7 +26,7 @@ from collections.abc import Mapping
 import numpy as np
 from scipy import signal as sps
 
-from enclab.quantize import quantize
+from enclab.core.quantize import quantize
 
 __all__ = [
     "fit_offset",

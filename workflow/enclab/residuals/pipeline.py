@@ -145,7 +145,7 @@ def analyse_channel(df: pd.DataFrame, meta: Mapping, pair: Mapping, settings: Ma
     Parameters
     ----------
     df, meta : DataFrame, dict
-        Canonical log (:func:`enclab.io.read_canonical`).
+        Canonical log (:func:`enclab.core.canonical.read_canonical`).
     pair : dict
         ``{"measured", "truth"}`` channel names (:func:`residual_pairs`).
     settings : dict

@@ -604,7 +604,7 @@ def fold_spread(folds_out: Sequence[Mapping]) -> dict:
 
 def run_from_canonical(df, meta: Mapping, measured: str, truth: str, torques: Sequence[str] = (),
                        conditions: Mapping | None = None, run_id: str | None = None) -> Run:
-    """A :class:`Run` from a canonical log (:func:`enclab.io.read_canonical`): channel names of
+    """A :class:`Run` from a canonical log (:func:`enclab.core.canonical.read_canonical`): channel names of
     the measured and truth angles and of the torques (N m) the compliance uses."""
     from enclab.residuals.pipeline import channel_values
 

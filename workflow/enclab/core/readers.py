@@ -1,10 +1,9 @@
-"""All disk I/O of enclab: manifest, raw log readers, canonical Parquet, atomic writers.
+"""Raw log readers: the manifest, and the numbers of the columns a manifest entry needs.
 
-Readers return the raw numbers of the columns a manifest entry needs (:class:`RawLog`) and
-know, for every sample, where it sits in its file (text line, table row, or sample of a
-one-value-per-line file), so that every :class:`~enclab.errors.EnclabInputError` names the
-exact place. The conversions to SI, the time base and the checks on it are pure functions
-in :mod:`enclab.ingest`.
+Readers return :class:`RawLog` and know, for every sample, where it sits in its file (text line,
+table row, or sample of a one-value-per-line file), so that every
+:class:`~enclab.core.errors.EnclabInputError` names the exact place. The conversions to SI, the
+time base and the checks on it are pure functions in :mod:`enclab.core.ingest`.
 
 Files come as labs have them: any of the formats may be gzip-compressed (read transparently,
 recognised by their first bytes), text files may be in another encoding than UTF-8
@@ -12,67 +11,40 @@ recognised by their first bytes), text files may be in another encoding than UTF
 semicolon-separated files with decimal commas are read when declared (``reader.delimiter: ";"``,
 ``reader.decimal: ","``). When a file does not match what the entry declares, the error says
 which key to set.
-
-Every writer is atomic: it writes a temporary file in the target's directory and moves it
-into place with :func:`os.replace`, so an interrupted job never leaves a partial output.
 """
 from __future__ import annotations
 
 import codecs
 import contextlib
-import functools
-import glob
 import gzip
 import hashlib
 import io as _stdio
-import json
-import math
 import os
 import re
-import shutil
-import tempfile
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
-import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 import yaml
 
-from enclab.errors import EnclabInputError
-from enclab.manifest import validate_manifest
+from enclab.core.errors import EnclabInputError
+from enclab.core.manifest import validate_manifest
 
 __all__ = [
-    "CANONICAL_METADATA_KEY",
-    "atomic_folder",
     "RawLog",
     "require_finite",
     "entry_files",
     "file_sha256",
-    "ingest_log",
-    "iter_canonical",
     "is_gzip",
     "read_bytes",
-    "read_canonical",
-    "read_json",
     "read_manifest",
     "read_raw",
-    "read_table",
-    "read_texts",
-    "save_figure",
-    "save_thumbnail",
-    "write_canonical",
-    "write_canonical_chunks",
-    "write_json",
-    "write_parquet",
-    "write_table",
-    "write_text",
 ]
 
-CANONICAL_METADATA_KEY = b"enclab"
 # libyaml's parser, when PyYAML has it, builds the same objects (same constructor) 5x faster:
 # a 500-log manifest takes 0.14 s instead of 0.72 s, paid by every Snakemake start.
 _YAML_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
@@ -96,7 +68,7 @@ def read_manifest(path: str | os.PathLike, devices: dict) -> tuple[Path, list[di
     data_root : pathlib.Path
         ``data_root`` of the manifest, relative to the working directory as written.
     entries : list of dict
-        Normalised log entries (see :func:`enclab.manifest.validate_manifest`).
+        Normalised log entries (see :func:`enclab.core.manifest.validate_manifest`).
 
     Raises
     ------
@@ -158,13 +130,13 @@ class RawLog:
     channels : dict of str to ndarray
         float64 values in file units, keyed by channel ``name`` (manifest order). Finite,
         except when the entry has a crop: then only the samples the crop keeps are checked
-        (by :func:`enclab.ingest.canonicalize`).
+        (by :func:`enclab.core.ingest.canonicalize`).
     columns : dict of str to str
         Source column label of each channel, for messages.
     locations : ndarray of int64
         User-facing location of each sample in ``file`` (``locations[i]`` for sample ``i``).
     row_label : {"line", "row", "sample"}
-        How ``locations`` count (see :mod:`enclab.errors`).
+        How ``locations`` count (see :mod:`enclab.core.errors`).
     time : ndarray or None
         float64 time values in the manifest's time unit (None for the ``rate_hz`` form).
     time_file : str or None
@@ -285,7 +257,7 @@ def read_raw(entry: dict, data_root: str | os.PathLike) -> RawLog:
     )
     _drop_trailing_empty(raw, bool(reader.get("skip_trailing_empty", True)))
     if not entry.get("crop"):
-        # With a crop, only the kept samples must be finite: enclab.ingest checks them.
+        # With a crop, only the kept samples must be finite: enclab.core.ingest checks them.
         for name, values in raw.channels.items():
             require_finite(values, raw, raw.columns[name])
     if raw.n_samples == 0:
@@ -700,311 +672,3 @@ def _numeric_array(value: Any, name: str, display: str) -> np.ndarray:
         raise EnclabInputError(display, f"variable of MATLAB type {array.dtype} is not numeric", column=name,
                                expected="a real numeric array")
     return array
-
-
-def ingest_log(entry: dict, data_root: str | os.PathLike, devices: dict) -> tuple[pd.DataFrame, dict]:
-    """Read one log and convert it to the canonical form (see :func:`enclab.ingest.canonicalize`).
-
-    Also records the SHA-256 of the data file in ``meta["source"]["sha256"]``.
-    """
-    from enclab.ingest import canonicalize
-
-    raw = read_raw(entry, data_root)
-    df, meta = canonicalize(raw, entry, devices)
-    meta["source"]["sha256"] = file_sha256(Path(data_root) / entry["file"])
-    return df, meta
-
-
-# --------------------------------------------------------------------------- canonical Parquet
-
-
-def write_canonical(df: pd.DataFrame, meta: dict, path: str | os.PathLike) -> None:
-    """Write a canonical log: Parquet with the metadata JSON under schema key ``b"enclab"``."""
-    write_parquet(df, path, metadata=meta)
-
-
-def read_canonical(path: str | os.PathLike) -> tuple[pd.DataFrame, dict]:
-    """Read a canonical log written by :func:`write_canonical`; returns ``(df, meta)``."""
-    table = pq.read_table(path)
-    raw_meta = (table.schema.metadata or {}).get(CANONICAL_METADATA_KEY)
-    if raw_meta is None:
-        raise EnclabInputError(path, "Parquet file without enclab metadata",
-                               expected="a canonical log written by enclab.io.write_canonical")
-    return table.to_pandas(), json.loads(raw_meta)
-
-
-def _canonical_meta(path, schema: pa.Schema) -> dict:
-    raw_meta = (schema.metadata or {}).get(CANONICAL_METADATA_KEY)
-    if raw_meta is None:
-        raise EnclabInputError(path, "Parquet file without enclab metadata",
-                               expected="a canonical log written by enclab.io.write_canonical")
-    return json.loads(raw_meta)
-
-
-def iter_canonical(path: str | os.PathLike, batch_rows: int = 262_144,
-                   columns: list[str] | None = None, start: int = 0,
-                   stop: int | None = None) -> tuple[dict, int, Iterator[pd.DataFrame]]:
-    """Read a canonical log piece by piece, for logs too long to hold in memory.
-
-    Parameters
-    ----------
-    path : str or path-like
-        A canonical log (:func:`write_canonical` or :func:`write_canonical_chunks`).
-    batch_rows : int
-        Rows per yielded piece (at most; a row group's last piece may be shorter). Memory
-        is bounded by about one decoded row group plus one piece.
-    columns : list of str, optional
-        Columns to read (default all).
-    start, stop : int, optional
-        Only rows ``start`` to ``stop - 1`` (default: all); row groups outside are not read.
-
-    Returns
-    -------
-    meta : dict
-        The log's metadata.
-    n_rows : int
-        Rows in the file (from the Parquet footer, before any data is read).
-    pieces : iterator of DataFrame
-        Consecutive pieces in file order.
-    """
-    if isinstance(batch_rows, bool) or not isinstance(batch_rows, int) or batch_rows < 1:
-        raise ValueError(f"batch_rows must be a positive integer, got {batch_rows!r}")
-    try:
-        handle = pq.ParquetFile(path)
-    except FileNotFoundError:
-        raise EnclabInputError(path, "file not found") from None
-    except (pa.ArrowInvalid, OSError) as exc:
-        raise EnclabInputError(path, f"not a readable Parquet file ({exc})") from None
-    meta = _canonical_meta(path, handle.schema_arrow)
-    n_rows = int(handle.metadata.num_rows)
-    stop = n_rows if stop is None else stop
-    if not 0 <= start <= stop <= n_rows:
-        raise ValueError(f"{path}: rows {start} to {stop} are not inside its {n_rows} rows")
-
-    def pieces():
-        # Row group by row group, not ParquetFile.iter_batches: with pyarrow 26 the latter
-        # keeps every compressed row group it has read in Arrow's pool (bench_performance: a
-        # decode-only pass over the one-hour 10 kHz log peaked at 946 MB, 366 MB this way).
-        with handle:
-            first = 0
-            for i in range(handle.num_row_groups):
-                size = handle.metadata.row_group(i).num_rows
-                lo, hi = max(start - first, 0), min(stop - first, size)
-                first += size
-                if lo >= hi:
-                    continue
-                table = handle.read_row_group(i, columns=columns).slice(lo, hi - lo)
-                for batch in table.to_batches(max_chunksize=batch_rows):
-                    yield batch.to_pandas()
-                del table
-
-    return meta, n_rows, pieces()
-
-
-def write_canonical_chunks(chunks, meta: dict, path: str | os.PathLike) -> int:
-    """Write a canonical log from an iterable of DataFrames, one Parquet row group each.
-
-    Only one chunk is held in memory at a time, so logs larger than memory can be
-    written. The file appears atomically when every chunk is written (no partial output).
-
-    Parameters
-    ----------
-    chunks : iterable of DataFrame
-        Consecutive pieces with identical columns and dtypes.
-    meta : dict
-        Canonical metadata, stored as JSON under schema key ``b"enclab"``.
-    path : str or path-like
-
-    Returns
-    -------
-    int
-        Rows written.
-    """
-    rows = 0
-    with _atomic_path(path) as tmp:
-        writer = None
-        try:
-            for chunk in chunks:
-                table = pa.Table.from_pandas(chunk, preserve_index=False)
-                if writer is None:
-                    merged = dict(table.schema.metadata or {})
-                    merged[CANONICAL_METADATA_KEY] = json.dumps(
-                        _jsonable(meta), allow_nan=False).encode()
-                    schema = table.schema.with_metadata(merged)
-                    writer = pq.ParquetWriter(tmp, schema)
-                writer.write_table(table.replace_schema_metadata(schema.metadata),
-                                   row_group_size=max(table.num_rows, 1))
-                rows += table.num_rows
-        finally:
-            if writer is not None:
-                writer.close()
-        if writer is None:
-            raise ValueError(f"no chunks to write to {str(path)!r}")
-    return rows
-
-
-# --------------------------------------------------------------------------- atomic writers
-
-
-@functools.cache
-def _umask() -> int:
-    # os.umask can only be read by setting it; once per process, before any writer runs.
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
-
-
-@contextlib.contextmanager
-def _atomic_path(path: str | os.PathLike) -> Iterator[Path]:
-    """Yield a temporary path next to ``path``; move it into place on success, remove on error.
-
-    Temporary files of ``path`` left by a writer that was killed (SIGKILL, power cut: no
-    ``except`` ran) are removed first, so rewriting an output also clears its leftovers.
-    """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    for stale in path.parent.glob(f".{glob.escape(path.name)}.*.tmp{glob.escape(path.suffix)}"):
-        stale.unlink(missing_ok=True)
-    handle, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".tmp{path.suffix}", dir=path.parent)
-    # mkstemp makes the file private (0600); the output gets the mode a plain open() would
-    # give it, so that a lab's group can read results on a shared file system.
-    os.fchmod(handle, 0o666 & ~_umask())
-    os.close(handle)
-    tmp = Path(tmp_name)
-    try:
-        yield tmp
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-
-
-@contextlib.contextmanager
-def atomic_folder(path: str | os.PathLike) -> Iterator[Path]:
-    """Yield an empty temporary folder next to ``path``; rename it to ``path`` on success,
-    remove it on error, so that ``path`` exists only complete (``path`` must not exist)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
-    tmp.chmod(0o777 & ~_umask())  # as os.mkdir would make it, not mkdtemp's 0700
-    try:
-        yield tmp
-        os.rename(tmp, path)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-
-
-def _jsonable(obj: Any) -> Any:
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return [_jsonable(v) for v in obj.tolist()]
-    if isinstance(obj, np.generic):
-        obj = obj.item()
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, os.PathLike):
-        return os.fspath(obj)
-    return obj
-
-
-def write_text(text: str, path: str | os.PathLike) -> None:
-    """Write ``text`` (UTF-8) atomically."""
-    with _atomic_path(path) as tmp:
-        tmp.write_text(text, encoding="utf-8")
-
-
-def write_json(obj: Any, path: str | os.PathLike) -> None:
-    """Write JSON atomically (indent 2); NaN/inf become null, numpy scalars/arrays plain JSON."""
-    write_text(json.dumps(_jsonable(obj), indent=2, allow_nan=False) + "\n", path)
-
-
-def read_json(path: str | os.PathLike) -> Any:
-    """Parse a JSON file."""
-    with open(path, encoding="utf-8") as handle:
-        return json.load(handle)
-
-
-def read_texts(folder: str | os.PathLike, pattern: str = "*") -> dict[str, str]:
-    """``{file name: text}`` of the files in ``folder`` matching ``pattern`` (none: ``{}``);
-    bytes that are not UTF-8 are replaced (these are logs to show, not data to parse)."""
-    folder = Path(folder)
-    if not folder.is_dir():
-        return {}
-    return {p.name: p.read_text(encoding="utf-8", errors="replace")
-            for p in sorted(folder.glob(pattern)) if p.is_file()}
-
-
-def write_parquet(df: pd.DataFrame, path: str | os.PathLike, metadata: dict | None = None) -> None:
-    """Write a DataFrame to Parquet atomically, with ``metadata`` as JSON under key ``b"enclab"``."""
-    table = pa.Table.from_pandas(df, preserve_index=False)
-    if metadata is not None:
-        merged = dict(table.schema.metadata or {})
-        merged[CANONICAL_METADATA_KEY] = json.dumps(_jsonable(metadata), allow_nan=False).encode()
-        table = table.replace_schema_metadata(merged)
-    with _atomic_path(path) as tmp:
-        pq.write_table(table, tmp)
-
-
-def write_table(df: pd.DataFrame, path: str | os.PathLike) -> None:
-    """Write a table atomically as CSV or Parquet, chosen by the suffix of ``path``."""
-    suffix = Path(path).suffix.lower()
-    if suffix == ".parquet":
-        write_parquet(df, path)
-    elif suffix == ".csv":
-        with _atomic_path(path) as tmp:
-            df.to_csv(tmp, index=False)
-    else:
-        raise ValueError(f"path must end in .csv or .parquet, got {str(path)!r}")
-
-
-def read_table(path: str | os.PathLike) -> pd.DataFrame:
-    """Read a table written by :func:`write_table` (.csv or .parquet)."""
-    suffix = Path(path).suffix.lower()
-    if suffix == ".parquet":
-        return pd.read_parquet(path)
-    if suffix == ".csv":
-        return pd.read_csv(path)
-    raise ValueError(f"path must end in .csv or .parquet, got {str(path)!r}")
-
-
-def save_thumbnail(source: str | os.PathLike, path: str | os.PathLike, max_width: int = 480,
-                   colors: int = 64) -> None:
-    """A small copy of a PNG figure for the HTML report, written atomically.
-
-    Scaled to at most ``max_width`` pixels wide (aspect kept, Lanczos) and reduced to a palette
-    of ``colors`` colours: a tenth of the full figure's bytes, the same for the same input.
-    """
-    from PIL import Image
-
-    if max_width < 16 or not 2 <= colors <= 256:
-        raise ValueError(f"max_width must be >= 16 and colors in 2..256, got {max_width}, {colors}")
-    with Image.open(source) as image:
-        image = image.convert("RGB")
-    if image.width > max_width:
-        height = max(1, round(image.height * max_width / image.width))
-        image = image.resize((max_width, height), Image.LANCZOS)
-    image = image.quantize(colors=colors)
-    with _atomic_path(path) as tmp:
-        image.save(tmp, format="PNG", optimize=True)
-
-
-# Date stamps that would make figure files differ between identical runs.
-_NO_DATES = {"pdf": {"CreationDate": None, "ModDate": None}, "svg": {"Date": None}}
-
-
-def save_figure(fig, path: str | os.PathLike, dpi: int = 150) -> None:
-    """Save a matplotlib Figure atomically (format from the suffix, no date stamps) and close it."""
-    import matplotlib.pyplot as plt
-
-    fmt = Path(path).suffix.lower().lstrip(".")
-    if not fmt:
-        raise ValueError(f"path needs a suffix naming the format, got {str(path)!r}")
-    try:
-        with _atomic_path(path) as tmp:
-            fig.savefig(tmp, dpi=dpi, format=fmt, metadata=_NO_DATES.get(fmt))
-    finally:
-        plt.close(fig)

@@ -3,7 +3,7 @@
 The manifest contract is ``workflow/schemas/manifest.schema.yaml``; every key is documented
 there. :func:`validate_manifest` checks a parsed document against it (JSON Schema Draft
 2020-12), fills the defaults the rest of the package relies on, and runs the checks a schema
-cannot express. Reading the YAML file is :func:`enclab.io.read_manifest`'s job.
+cannot express. Reading the YAML file is :func:`enclab.core.readers.read_manifest`'s job.
 """
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ import jsonschema
 import yaml
 
 import enclab
-from enclab.errors import EnclabInputError
+from enclab.core.errors import EnclabInputError
 
 __all__ = [
     "READER_KEYS",

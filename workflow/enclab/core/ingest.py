@@ -1,6 +1,6 @@
 """Pure conversions of a raw log to the canonical form (time base, units, counters, grids).
 
-:func:`canonicalize` takes the raw numbers read by :func:`enclab.io.read_raw` and one
+:func:`canonicalize` takes the raw numbers read by :func:`enclab.core.readers.read_raw` and one
 normalised manifest entry and returns the canonical DataFrame and its metadata (see
 ``docs/architecture.md``, "Canonical log"). Quantized signals are stored as int64 counts
 plus an SI step, because re-quantizing re-rounded floats is not idempotent; the
@@ -16,15 +16,18 @@ from __future__ import annotations
 
 import copy
 import math
+import os
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from enclab.errors import EnclabInputError
-from enclab.io import require_finite
-from enclab.manifest import channel_axis, detect_grid_enabled
+from enclab.core.errors import EnclabInputError
+from enclab.core.manifest import channel_axis, detect_grid_enabled
+from enclab.core.readers import file_sha256, read_raw, require_finite
 
 __all__ = [
+    "ingest_log",
     "GRID_TOLERANCE",
     "RATE_TOLERANCE",
     "SLOW_RATE_HZ",
@@ -313,10 +316,10 @@ def canonicalize(raw, entry: dict, devices: dict) -> tuple[pd.DataFrame, dict]:
 
     Parameters
     ----------
-    raw : enclab.io.RawLog
+    raw : enclab.core.readers.RawLog
         Raw numbers of the entry's columns with their file locations.
     entry : dict
-        Normalised manifest entry (:func:`enclab.manifest.validate_manifest`).
+        Normalised manifest entry (:func:`enclab.core.manifest.validate_manifest`).
     devices : dict
         Device specifications by name (``config["devices"]``).
 
@@ -325,7 +328,7 @@ def canonicalize(raw, entry: dict, devices: dict) -> tuple[pd.DataFrame, dict]:
     df : pandas.DataFrame
         Column ``t`` (float64 s), then one column per channel: int64 counts or float64 SI.
     meta : dict
-        ``log_id``, ``source`` {file, sha256 (None; set by :func:`enclab.io.ingest_log`),
+        ``log_id``, ``source`` {file, sha256 (None; set by :func:`enclab.core.ingest.ingest_log`),
         format}, ``fs_hz``, ``n_samples``, ``device``, ``group``, ``tags``, ``time_report``
         (see :func:`time_report`), ``channels`` [{name, role, joint, unit, storage, step,
         native_step}], ``analysis``, ``warnings`` (lines about odd but usable input, e.g.
@@ -414,4 +417,15 @@ def canonicalize(raw, entry: dict, devices: dict) -> tuple[pd.DataFrame, dict]:
         "analysis": copy.deepcopy(entry.get("analysis") or {}),
         "warnings": warnings,
     }
+    return df, meta
+
+
+def ingest_log(entry: dict, data_root: str | os.PathLike, devices: dict) -> tuple[pd.DataFrame, dict]:
+    """Read one log and convert it to the canonical form (see :func:`canonicalize`).
+
+    Also records the SHA-256 of the data file in ``meta["source"]["sha256"]``.
+    """
+    raw = read_raw(entry, data_root)
+    df, meta = canonicalize(raw, entry, devices)
+    meta["source"]["sha256"] = file_sha256(Path(data_root) / entry["file"])
     return df, meta

@@ -1,7 +1,7 @@
 """Across logs: pool repeat runs, compare measured with predicted error, check the bounds.
 
 The input is the batch table (``results/batch/quantization.csv``, one row per log, level,
-signal, filter and architecture; see :func:`enclab.analysis.summary_table`). A *repeat group*
+signal, filter and architecture; see :func:`enclab.propagation.analysis.summary_table`). A *repeat group*
 is the set of logs that share ``group`` (a log whose group is missing is its own group,
 named by its ``log_id``): the same configuration and protocol run several times. Runs are
 independent, so the spread of their variances gives a confidence interval that holds however

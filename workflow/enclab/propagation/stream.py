@@ -1,25 +1,25 @@
 """The paper-000 error moments of logs too long for memory, one piece at a time.
 
 A one-hour, 10 kHz, 7-joint log is 36 million samples; its canonical table alone is 2.3 GB,
-and the in-memory stages (:mod:`enclab.analysis`) hold many times that. This module computes
-exactly what the ``moments`` rule computes (:func:`enclab.analysis.empirical_rows`) from
+and the in-memory stages (:mod:`enclab.propagation.analysis`) hold many times that. This module computes
+exactly what the ``moments`` rule computes (:func:`enclab.propagation.analysis.empirical_rows`) from
 consecutive pieces of the log, with memory bounded by one Parquet row group and one piece
 per process:
 
 - **re-quantization** and **kinematics** are pointwise, so each piece goes through the same
-  functions as the whole log (:func:`enclab.analysis.level_counts`, the device's kinematics;
+  functions as the whole log (:func:`enclab.propagation.analysis.level_counts`, the device's kinematics;
   a DH chain composed from table look-ups of ``cos``/``sin`` of the counts, bit for bit the
   values ``numpy`` computes);
 - **derivative filters** are run by ``scipy.signal.lfilter`` with the same coefficients
-  (:func:`enclab.filters.transfer_function`); the filter state is carried from piece to piece
+  (:func:`enclab.propagation.filters.transfer_function`); the filter state is carried from piece to piece
   (``zi``/``zf``), which repeats the whole-signal recursion operation for operation;
 - **moments** are accumulated per batch of the batch-means layout, fixed in advance from the
   number of samples (``numpy.array_split`` of the samples after each filter's start-up
-  transient, as :func:`enclab.moments.error_moments` splits them). Each batch keeps its
+  transient, as :func:`enclab.propagation.moments.error_moments` splits them). Each batch keeps its
   count, mean and sum of squared deviations, merged across pieces with the pairwise update
   of Chan, Golub and LeVeque; the global mean, variance and the batch variances about the
   global mean follow exactly from them. The start-up transient is skipped with the same
-  ``settle_tol`` rule (:func:`enclab.filters.settle_samples`).
+  ``settle_tol`` rule (:func:`enclab.propagation.filters.settle_samples`).
 - **in parallel** (:func:`empirical_rows_from_file`, ``--workers``): the log is cut into
   contiguous time ranges, one per process. A range that does not start the log is filtered
   from rest for :func:`warmup_samples` before its first sample (the impulse responses have
@@ -27,7 +27,7 @@ per process:
   round-off), and the ranges' batch accumulators are merged in time order. The filters hold
   the GIL (``lfilter``), so processes, not threads.
 
-The result is every row :func:`enclab.analysis.empirical_rows` produces (every level, signal,
+The result is every row :func:`enclab.propagation.analysis.empirical_rows` produces (every level, signal,
 filter of the bank and architecture; ``mean``, ``std``, ``std_ci``, ``max_abs``, ``n``),
 equal to the in-memory result to round-off (``tests/test_stream.py`` checks 1e-12). The long
 path does not write the intermediate tables (``requantized``/``kinematics``/``derivatives``
@@ -36,8 +36,8 @@ whole trajectory).
 
 Usage (see the README, "Long logs")::
 
-    python -m enclab.stream generate results/benchmarks/long_franka.parquet --duration-s 3600
-    python -m enclab.stream moments results/benchmarks/long_franka.parquet moments.json
+    python -m enclab.propagation.stream generate results/benchmarks/long_franka.parquet --duration-s 3600
+    python -m enclab.propagation.stream moments results/benchmarks/long_franka.parquet moments.json
 
 References
 ----------
@@ -59,10 +59,10 @@ import numpy as np
 import pandas as pd
 import scipy.signal
 
-from enclab import analysis
-from enclab import filters as flt
-from enclab import moments as mom
-from enclab.kinematics import DHChain
+from enclab.propagation import analysis
+from enclab.propagation import filters as flt
+from enclab.propagation import moments as mom
+from enclab.propagation.kinematics import DHChain
 
 __all__ = [
     "BatchMoments",
@@ -90,7 +90,7 @@ class BatchMoments:
     skip : int
         Leading samples left out (the filter's start-up transient).
     n_batches : int
-        Batches of :func:`enclab.moments.error_moments` (``numpy.array_split`` of the
+        Batches of :func:`enclab.propagation.moments.error_moments` (``numpy.array_split`` of the
         ``n_total - skip`` kept samples).
     k : int
         Columns.
@@ -164,7 +164,7 @@ class BatchMoments:
 
     def result(self, ci_level: float = 0.95) -> dict:
         """``mean``, ``std``, ``std_ci``, ``max_abs`` (arrays of shape ``(k,)``) and ``n``, as
-        :func:`enclab.moments.error_moments` computes them.
+        :func:`enclab.propagation.moments.error_moments` computes them.
 
         Raises
         ------
@@ -234,7 +234,7 @@ class _Kinematics:
 
     Angles come as rows ``(n, m)``; outputs are ``x`` ``(m_out, m)`` and ``J`` ``(m_out, n,
     m)``. A DH chain is composed from the cosines and sines directly
-    (:meth:`enclab.kinematics.DHChain.frames_from_trig`), with table look-ups for counts;
+    (:meth:`enclab.propagation.kinematics.DHChain.frames_from_trig`), with table look-ups for counts;
     any other device goes through its public ``forward`` / ``jacobian``. Either way the
     values are those of ``device.forward`` and ``device.jacobian`` on the same angles.
     """
@@ -290,7 +290,7 @@ class _Kinematics:
 
 def _joint_architecture_rows(jac_q: np.ndarray, jac: np.ndarray, phi: np.ndarray,
                              phi_err: np.ndarray) -> np.ndarray:
-    """:func:`enclab.analysis.joint_architecture_error` in the joint-major layout."""
+    """:func:`enclab.propagation.analysis.joint_architecture_error` in the joint-major layout."""
     out = np.zeros((jac.shape[0], phi.shape[1]))
     for i in range(phi.shape[0]):
         out += (jac_q[:, i] - jac[:, i]) * phi[i]
@@ -327,7 +327,7 @@ class _Accumulation:
     """The moments of every row of one log, fed piece by piece (joint-major signals).
 
     Holds the batch accumulators of every row block, in the order
-    :func:`enclab.analysis.empirical_rows` emits them, and the filter states. Samples before
+    :func:`enclab.propagation.analysis.empirical_rows` emits them, and the filter states. Samples before
     ``record_from`` only advance the filter states (the warm-up of a time range that does not
     start the log); accumulations of consecutive time ranges combine with :meth:`merge`.
     """
@@ -481,7 +481,7 @@ def empirical_rows(pieces: Iterable[pd.DataFrame], meta: Mapping, levels: Sequen
                    bank: Sequence[flt.DerivativeFilter], architectures: Sequence[str], *,
                    settle_tol: float = 1e-9, ci_level: float = 0.95, n_batches: int = 20,
                    timings: dict | None = None) -> list[dict]:
-    """:func:`enclab.analysis.empirical_rows` of a log given as consecutive pieces.
+    """:func:`enclab.propagation.analysis.empirical_rows` of a log given as consecutive pieces.
 
     Parameters
     ----------
@@ -491,14 +491,14 @@ def empirical_rows(pieces: Iterable[pd.DataFrame], meta: Mapping, levels: Sequen
     meta : dict
         Canonical metadata; ``n_samples`` fixes the batch layout in advance.
     levels, bank, architectures, settle_tol, ci_level, n_batches
-        As for :func:`enclab.analysis.empirical_rows`.
+        As for :func:`enclab.propagation.analysis.empirical_rows`.
     timings : dict, optional
         Seconds spent per stage (:data:`STAGES`) are added to it.
 
     Returns
     -------
     list of dict
-        The rows of :func:`enclab.analysis.empirical_rows`, in the same order.
+        The rows of :func:`enclab.propagation.analysis.empirical_rows`, in the same order.
 
     Notes
     -----
@@ -545,9 +545,9 @@ def time_ranges(n_samples: int, workers: int, warmup: int) -> list[tuple[int, in
 def _range_worker(path: str, lo: int, hi: int, warmup: int, levels, bank_specs,
                   architectures, settle_tol: float, n_batches: int, chunk_rows: int) -> tuple:
     """One time range of a canonical file, in a worker process."""
-    from enclab import io
+    from enclab.core import canonical
 
-    meta, _, pieces = io.iter_canonical(path, batch_rows=chunk_rows,
+    meta, _, pieces = canonical.iter_canonical(path, batch_rows=chunk_rows,
                                         start=max(lo - warmup, 0), stop=hi)
     bank = [flt.DerivativeFilter.from_dict(dict(spec)) for spec in bank_specs]
     acc = _Accumulation(meta, levels, bank, architectures, settle_tol=settle_tol,
@@ -660,7 +660,7 @@ def franka_motion_chunks(duration_s: float, fs_hz: float, seed: int, *,
     meta = {
         "log_id": log_id,
         "source": {"file": None, "sha256": None, "format": "generated",
-                   "generator": "enclab.stream.franka_motion_chunks",
+                   "generator": "enclab.propagation.stream.franka_motion_chunks",
                    "params": {"duration_s": duration_s, "fs_hz": fs_hz, "seed": seed,
                               "counts_per_rev": counts_per_rev}},
         "fs_hz": float(fs_hz),
@@ -695,13 +695,13 @@ def franka_motion_chunks(duration_s: float, fs_hz: float, seed: int, *,
 def _moments_command(args) -> int:
     import yaml
 
-    from enclab import io
+    from enclab.core import atomic, canonical
 
     with open(args.configfile, encoding="utf-8") as handle:
         config = yaml.safe_load(handle)
     timings: dict = {}
     t0 = time.perf_counter()
-    meta, n_rows, _ = io.iter_canonical(args.canonical)
+    meta, n_rows, _ = canonical.iter_canonical(args.canonical)
     if n_rows != int(meta["n_samples"]):
         raise ValueError(f"{args.canonical}: {n_rows} rows but n_samples = {meta['n_samples']}")
     settings = dict(config["requantize"])
@@ -720,13 +720,13 @@ def _moments_command(args) -> int:
                                     n_batches=config["moments"]["n_batches"], workers=workers,
                                     chunk_rows=args.chunk_rows, timings=timings,
                                     worker_peaks_mb=peaks)
-    io.write_json({"log_id": meta["log_id"], "rows": rows}, args.out)
+    atomic.write_json({"log_id": meta["log_id"], "rows": rows}, args.out)
     if args.timings:
         own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
         # The sum of every process's own peak bounds the memory in use at any moment (the
         # peaks need not coincide).
         peak = own + sum(peaks)
-        io.write_json({"n_samples": int(meta["n_samples"]), "n_joints": len(levels[0]["joints"]),
+        atomic.write_json({"n_samples": int(meta["n_samples"]), "n_joints": len(levels[0]["joints"]),
                        "n_levels": len(levels), "n_filters": len(bank), "n_rows": len(rows),
                        "chunk_rows": args.chunk_rows, "workers": len(peaks) + 1,
                        "stages_s": timings, "stages_note": "seconds summed over workers",
@@ -736,18 +736,18 @@ def _moments_command(args) -> int:
 
 
 def _generate_command(args) -> int:
-    from enclab import io
+    from enclab.core import canonical
 
     meta, chunks = franka_motion_chunks(args.duration_s, args.fs_hz, args.seed,
                                         chunk_rows=args.row_group_rows, log_id=args.log_id)
-    io.write_canonical_chunks(chunks, meta, args.out)
+    canonical.write_canonical_chunks(chunks, meta, args.out)
     print(json.dumps({"out": str(args.out), "n_samples": meta["n_samples"]}))
     return 0
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Command line: ``generate`` a long Franka log, or compute a log's ``moments`` streaming."""
-    parser = argparse.ArgumentParser(prog="python -m enclab.stream", description=__doc__.split(
+    parser = argparse.ArgumentParser(prog="python -m enclab.propagation.stream", description=__doc__.split(
         "\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
     g = sub.add_parser("generate", help="write a long simulated 7-joint Franka log (Parquet)")
@@ -772,7 +772,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                         "per available CPU; 1: read in this process)")
     m.add_argument("--timings", help="also write per-stage seconds and peak RSS (JSON)")
     args = parser.parse_args(argv)
-    from enclab.errors import EnclabInputError
+    from enclab.core.errors import EnclabInputError
 
     try:
         return _moments_command(args) if args.command == "moments" else _generate_command(args)

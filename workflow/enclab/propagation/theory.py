@@ -9,7 +9,7 @@ lies in ``(a - step, a]``. Operational space ``x = f(theta)``, ``x~ = f(theta^) 
 which is ``J e`` to first order. Derivative estimators are linear filters given by their
 impulse response ``h`` (any units, e.g. 1/s for a velocity filter); every function here takes
 plain arrays, so it describes exactly the filter that was applied (build ``h`` with
-:func:`enclab.filters.impulse_response`).
+:func:`enclab.propagation.filters.impulse_response`).
 
 Three layers
 ------------
@@ -83,7 +83,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from enclab.quantize import ratio_of
+from enclab.core.quantize import ratio_of
 
 __all__ = [
     "QuantizerErrorModel",
@@ -340,7 +340,7 @@ def impulse_autocorrelation(h) -> np.ndarray:
     input with autocovariance ``C`` is ``r_h(0) C(0) + 2 sum_{m>=1} r_h(m) C(m)``.
     """
     h = _impulse(h)
-    import scipy.signal  # deferred, see enclab.filters.apply
+    import scipy.signal  # deferred, see enclab.propagation.filters.apply
 
     return scipy.signal.correlate(h, h, mode="full", method="direct")[h.size - 1 :]
 

@@ -141,7 +141,7 @@ def requantize_counts(counts, ratio: int, offset_frac: float = 0.5) -> np.ndarra
     ``0.29 * 100`` cannot round up across an integer. With rounding on both grids the tie
     of a fine count exactly half-way between two coarse levels goes up, which gives the
     error a mean of ``+fine_step/2`` for even ``ratio`` (see
-    :class:`enclab.theory.QuantizerErrorModel`).
+    :class:`enclab.propagation.theory.QuantizerErrorModel`).
 
     Examples
     --------

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from enclab.kinematics import PhantomPremium15
+from enclab.propagation.kinematics import PhantomPremium15
 
 __all__ = ["fig6_configurations_deg", "phantom_protocol_run", "sinusoid_motion"]
 

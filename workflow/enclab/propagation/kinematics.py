@@ -480,7 +480,7 @@ class DHChain(Device):
         """Joint axes, points on them and end point from the cosines and sines of the joints.
 
         The joint-major layout (samples last) of :meth:`_axes`, for callers that keep whole
-        signals as rows (:mod:`enclab.stream`) or get the trigonometry cheaper than
+        signals as rows (:mod:`enclab.propagation.stream`) or get the trigonometry cheaper than
         ``numpy.cos`` (a table of quantized angles).
 
         Parameters

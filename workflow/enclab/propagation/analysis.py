@@ -35,12 +35,12 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from enclab import filters as flt
-from enclab import moments as mom
-from enclab import quantize as qz
-from enclab import theory as th
-from enclab.errors import EnclabInputError
-from enclab.kinematics import Device, make_device
+from enclab.core import quantize as qz
+from enclab.core.errors import EnclabInputError
+from enclab.propagation import filters as flt
+from enclab.propagation import moments as mom
+from enclab.propagation import theory as th
+from enclab.propagation.kinematics import Device, make_device
 
 __all__ = [
     "truth_channels",
@@ -180,7 +180,7 @@ def requantize(df: pd.DataFrame, meta: Mapping, levels: Sequence[Mapping]) -> pd
     """Truth channels plus one int64 counts column ``<name>@<level>`` per joint and level.
 
     A truth stored as counts is re-quantized exactly in integer arithmetic
-    (:func:`enclab.quantize.requantize_counts`); a float truth on its native grid is first
+    (:func:`enclab.core.quantize.requantize_counts`); a float truth on its native grid is first
     snapped to that grid; a truth without grid is quantized directly.
     """
     out = {"t": df["t"].to_numpy()}
@@ -399,7 +399,7 @@ def empirical_rows(req: pd.DataFrame, kin: pd.DataFrame, meta: Mapping,
 
     Filtered errors are computed as ``filter(measured) - filter(truth)`` (the filters are
     linear, so this is ``filter(measured - truth)``) and the first
-    :func:`enclab.filters.settle_samples` samples of each are discarded: the start-up
+    :func:`enclab.propagation.filters.settle_samples` samples of each are discarded: the start-up
     transient from rest is not part of the stationary error the theory describes.
     """
     fs = _fs(meta)
@@ -488,11 +488,11 @@ def _lag_sums(theta: np.ndarray, J: np.ndarray | None, models, max_lag: int,
 
     Returns ``c_joint`` (n, L+1) with ``mean_k C_i(theta_i(k+m) - theta_i(k))``, ``c_x``
     (m, L+1) with ``mean_k sum_i J_ji(k) J_ji(k+m) C_i(...)`` (the trajectory-averaged
-    autocovariance of :func:`enclab.theory.exact_std_operational`) and, for every joint-
+    autocovariance of :func:`enclab.propagation.theory.exact_std_operational`) and, for every joint-
     architecture filter ``label -> (h, c)``, the cross term of
-    :func:`enclab.theory.exact_std_joint_architecture`. Sharing the lag loop across the bank
+    :func:`enclab.propagation.theory.exact_std_joint_architecture`. Sharing the lag loop across the bank
     costs one pass instead of one per filter; the test suite checks the results equal the
-    per-filter functions of :mod:`enclab.theory`.
+    per-filter functions of :mod:`enclab.propagation.theory`.
     """
     n_samples, n = theta.shape
     c_joint = np.empty((n, max_lag + 1))
@@ -702,7 +702,7 @@ def centre_label(centre_rad: Sequence[float]) -> str:
 
 
 def summary_table(summary: Mapping, centre_deg: str = "") -> pd.DataFrame:
-    """One row per quantity of a summary (the batch-table columns of ``enclab.batch``)."""
+    """One row per quantity of a summary (the batch-table columns of ``enclab.propagation.batch``)."""
     device = summary.get("device") or {}
     step_of = {}
     for lv in summary["quantization"]["levels"]:

@@ -1,0 +1,21 @@
+"""Paper 000 (Colonnese & Okamura): how joint-space quantization error propagates to operational
+space and to the estimated velocity and acceleration, measured and predicted.
+
+Entry points: the per-log stage functions of :mod:`enclab.stages` (what the workflow's scripts
+call), built on :mod:`~enclab.propagation.analysis`; the models in
+:mod:`~enclab.propagation.theory`.
+
+- :mod:`enclab.propagation.theory`      Table II (worst case, PQN), the exact non-white model,
+  the trajectory worst-case bound
+- :mod:`enclab.propagation.filters`     derivative estimators of Fig. 5 and their norms
+- :mod:`enclab.propagation.kinematics`  devices: forward kinematics and Jacobians
+- :mod:`enclab.propagation.moments`     empirical error moments with confidence intervals
+- :mod:`enclab.propagation.analysis`    per-log analysis: re-quantization, errors, predictions
+- :mod:`enclab.propagation.batch`       batch tables and pooled ratios across logs
+- :mod:`enclab.propagation.stream`      the moments of logs too long for memory, piece by piece
+- :mod:`enclab.propagation.simulate`    simulated lab logs (Phantom Premium protocol)
+- :mod:`enclab.propagation.plots`       figures (Figs. 6-7, per-log errors, ratios)
+"""
+
+__all__ = ["theory", "filters", "kinematics", "moments", "analysis", "batch", "stream", "simulate",
+           "plots"]
