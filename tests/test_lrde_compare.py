@@ -117,6 +117,7 @@ def test_effect_comparison_names_hysteresis_and_keeps_the_sinusoid_on_a_clean_lo
     assert abs(w - 1 / 6) < 0.03
 
 
+@pytest.mark.slow
 def test_predictive_check_flags_a_log_no_candidate_explains():
     # A missed count mid-log, with no jump term among the candidates: every model reads a
     # whole step wrong on part of the log, which its own simulations never do.

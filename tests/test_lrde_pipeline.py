@@ -28,6 +28,7 @@ def _canonical(seed=21, with_measured=True):
     return out, {"log_id": "sim_lrde", "channels": channels}, p
 
 
+@pytest.mark.slow
 def test_analyse_lrde_log_block_matches_design_contract():
     df, meta, p = _canonical()
     block, figures, md, cycles = pipeline.analyse_lrde_log(df, meta, seed=5, settings=FAST)
@@ -59,6 +60,7 @@ def test_analyse_lrde_log_block_matches_design_contract():
     assert list(cycles.columns) == dwell.CYCLE_COLUMNS and len(cycles) >= 3
 
 
+@pytest.mark.slow
 def test_batch_rows_carry_posterior_and_diagnostics():
     df, meta, p = _canonical()
     block, _, _, _ = pipeline.analyse_lrde_log(df, meta, seed=5, settings=FAST)
@@ -75,6 +77,7 @@ def test_batch_rows_carry_posterior_and_diagnostics():
     assert rows["A12"]["reason"] is None
 
 
+@pytest.mark.slow
 def test_requantized_truth_and_unidentified_offset():
     df, meta, p = _canonical(with_measured=False)
     settings = dict(FAST, requantize={"step": STEP, "offset_frac": 0.35}, use_truth=False)
@@ -173,6 +176,7 @@ def test_run_summary_names_untrusted_lrde_quantities():
     assert "model hysteresis" in text and f"l: UNTRUSTED A12, E_b: {reason}" in text
 
 
+@pytest.mark.slow
 def test_hysteresis_with_a_truth_channel_is_named_and_a_b_hold_after():
     """A dead band of 1/8 step read beside a fine truth channel: the comparison names the
     hysteresis, and with it in the model the offset a and bias b intervals hold the truth."""

@@ -162,6 +162,7 @@ def test_hysteresis_below_the_truth_step_is_reported_indistinguishable_from_a_pl
         select_effects(log["t"], log["truth"], log["measured"], STEP, distinguish_bic=-1.0)
 
 
+@pytest.mark.slow
 def test_backward_check_drops_an_effect_that_a_later_one_made_redundant():
     # A challenge-benchmark log (seed 3580810742: a random smooth path, angle harmonics at 3x
     # their own threshold), its draws replayed as challenge_residuals._make_log makes them.
