@@ -1,5 +1,7 @@
-# enclab: logged encoder experiments -> quantization error (paper 000) and extreme low-resolution
-# encoder inference (paper 002). This file is wiring only; each stage is a rule file in
+# enclab: logged encoder experiments -> quantization error (paper 000: quantization.smk,
+# enclab.propagation), extreme low-resolution encoder inference (paper 002: lrde.smk,
+# enclab.lrde), residual effects (residuals.smk, rig.smk: enclab.residuals) and design mode
+# (design.smk: enclab.design). This file is wiring only; each stage is a rule file in
 # workflow/rules/ whose script (scripts/<rule>.py) calls the enclab package (workflow/enclab/).
 
 configfile: "config.yaml"
