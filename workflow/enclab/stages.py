@@ -14,7 +14,8 @@ import os
 from collections.abc import Mapping
 from pathlib import Path
 
-from enclab.core import atomic, canonical
+from enclab.core import atomic
+from enclab.core.canonical import read_canonical, write_canonical
 from enclab.core.errors import EnclabInputError
 from enclab.core.ingest import ingest_log
 from enclab.propagation import analysis
@@ -64,7 +65,7 @@ def ingest(entry: Mapping, data_root: PathLike, devices: Mapping, canonical: Pat
     df, meta = ingest_log(entry, data_root, devices)
     for line in meta.get("warnings") or []:
         _LOG.warning("[%s] %s", meta["log_id"], line)
-    canonical.write_canonical(df, meta, canonical)
+    write_canonical(df, meta, canonical)
 
 
 @functools.lru_cache(maxsize=64)
@@ -102,32 +103,32 @@ def check_cutoffs(settings: Mapping, meta: Mapping) -> None:
 def requantize(canonical: PathLike, settings: Mapping, requantized: PathLike) -> None:
     """Truth channels -> integer counts at every level (``settings``: ``config["requantize"]``,
     updated with the log's own ``analysis.requantize``)."""
-    df, meta = canonical.read_canonical(canonical)
+    df, meta = read_canonical(canonical)
     merged = dict(settings)
     merged.update((meta.get("analysis") or {}).get("requantize") or {})
     levels = analysis.plan_levels(meta, merged)
     meta = dict(meta, levels=levels)
-    canonical.write_canonical(analysis.requantize(df, meta, levels), meta, requantized)
+    write_canonical(analysis.requantize(df, meta, levels), meta, requantized)
 
 
 def kinematics(requantized: PathLike, out: PathLike) -> None:
     """Operational positions of truth and levels, Jacobian at the truth."""
-    req, meta = canonical.read_canonical(requantized)
-    canonical.write_canonical(analysis.kinematics_table(req, meta, meta["levels"]), meta, out)
+    req, meta = read_canonical(requantized)
+    write_canonical(analysis.kinematics_table(req, meta, meta["levels"]), meta, out)
 
 
 def derivatives(requantized: PathLike, settings: Mapping, export: list, out: PathLike) -> None:
     """The exported derivative estimators (``settings``: ``config["derivatives"]``)."""
-    req, meta = canonical.read_canonical(requantized)
+    req, meta = read_canonical(requantized)
     check_cutoffs(settings, meta)
-    canonical.write_canonical(analysis.export_derivatives(req, meta, meta["levels"], export), meta, out)
+    write_canonical(analysis.export_derivatives(req, meta, meta["levels"], export), meta, out)
 
 
 def moments(requantized: PathLike, kinematics_path: PathLike, settings: Mapping,
             moment_settings: Mapping, out: PathLike) -> None:
     """Empirical error moments over the whole derivative-filter bank."""
-    req, meta = canonical.read_canonical(requantized)
-    kin, _ = canonical.read_canonical(kinematics_path)
+    req, meta = read_canonical(requantized)
+    kin, _ = read_canonical(kinematics_path)
     check_cutoffs(settings, meta)
     rows = analysis.empirical_rows(
         req, kin, meta, meta["levels"], analysis.filter_bank(settings),
@@ -139,8 +140,8 @@ def moments(requantized: PathLike, kinematics_path: PathLike, settings: Mapping,
 def theory(requantized: PathLike, kinematics_path: PathLike, settings: Mapping,
            out: PathLike) -> None:
     """Table II, the exact model and the trajectory worst case for every row."""
-    req, meta = canonical.read_canonical(requantized)
-    kin, _ = canonical.read_canonical(kinematics_path)
+    req, meta = read_canonical(requantized)
+    kin, _ = read_canonical(kinematics_path)
     check_cutoffs(settings, meta)
     rows = analysis.theory_rows(req, kin, meta, meta["levels"], analysis.filter_bank(settings),
                                 settings["architectures"], settle_tol=settings["settle_tol"])
@@ -157,12 +158,12 @@ def summary(inputs: Mapping[str, PathLike], out: PathLike) -> None:
     motion-model comparison of its ``lrde`` block (:mod:`enclab.lrde.compare`).
     """
     if "moments" in inputs:
-        req, meta = canonical.read_canonical(inputs["requantized"])
+        req, meta = read_canonical(inputs["requantized"])
         block = analysis.build_summary(
             meta, meta["levels"], atomic.read_json(inputs["moments"])["rows"],
             atomic.read_json(inputs["theory"])["rows"], analysis.centre_of(req, meta))
     else:
-        _, meta = canonical.read_canonical(inputs["canonical"])
+        _, meta = read_canonical(inputs["canonical"])
         block = analysis.log_header(meta)
     block["warnings"] = list(meta.get("warnings") or [])
     if "lrde" in inputs:
@@ -185,9 +186,9 @@ def log_figures(inputs: Mapping[str, PathLike], export: list, settle_tol: float,
     """
     from enclab.propagation import plots  # matplotlib: only jobs that draw import it
 
-    req, meta = canonical.read_canonical(inputs["requantized"])
-    kin, _ = canonical.read_canonical(inputs["kinematics"])
-    deriv, _ = canonical.read_canonical(inputs["derivatives"])
+    req, meta = read_canonical(inputs["requantized"])
+    kin, _ = read_canonical(inputs["kinematics"])
+    deriv, _ = read_canonical(inputs["derivatives"])
     summary_block = atomic.read_json(inputs["summary"])
     level = meta["levels"][0]["label"]
     tr = analysis.error_traces(req, kin, deriv, meta, level, export, settle_tol)
