@@ -41,7 +41,7 @@ REPORT := $(SMK) --cores 1 --report results/report.html \
 	--report-metadata results/report/metadata.yaml --report-stylesheet workflow/report/report.css
 
 run: $(STAMP)
-	@echo "==> running the workflow on the embedded default (config.yaml, $(CORES) cores)"
+	@echo "==> running the workflow: config.yaml$(if $(CONFIG), + $(CONFIG),, the embedded default), $(CORES) cores"
 	@status=0; scope=all; \
 	if $(SMK) --cores $(CORES) --config batch_scope=all $(CONFIG) $(SMK_ARGS); then \
 		done=1; \
