@@ -10,7 +10,7 @@ def main(smk):
     fig = smk.params.figures
     atomic.save_figure(plots.fig6_position_error(pooled, level=fig["fig6_level"]), smk.output.fig6)
     atomic.save_figure(plots.fig7_derivative_error(pooled, fig["fig7_group"], level=fig["fig6_level"]),
-                   smk.output.fig7)
+                       smk.output.fig7)
 
 
 run(snakemake, main)  # noqa: F821

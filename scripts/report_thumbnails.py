@@ -16,7 +16,7 @@ def main(smk):
         with atomic.atomic_folder(folder) as tmp:
             for source, thumb in pairs:
                 atomic.save_thumbnail(source, os.path.join(tmp, os.path.relpath(thumb, folder)),
-                                  max_width=smk.params.width)
+                                      max_width=smk.params.width)
 
 
 run(snakemake, main)  # noqa: F821

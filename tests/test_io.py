@@ -150,7 +150,7 @@ def test_entry_files_lists_data_and_time_file():
     e = entry(file="sample_major.txt", format="text", reader={"values_per_sample": 2},
               time={"file": "sample_major_time.txt"}, channels=[aux("q1", 0)])
     assert readers.entry_files(e, "root") == [os.path.join("root", "sample_major.txt"),
-                                         os.path.join("root", "sample_major_time.txt")]
+                                              os.path.join("root", "sample_major_time.txt")]
     assert readers.entry_files(entry(file="a.csv", format="csv", channels=[aux("q", 0)]), "r") == [
         os.path.join("r", "a.csv")]
 
@@ -375,7 +375,7 @@ def test_truncated_gzip_names_the_file_and_the_fix(tmp_path):
 def test_write_json_converts_numpy_and_non_finite(tmp_path):
     path = tmp_path / "deep" / "dir" / "x.json"
     atomic.write_json({"a": np.float64(1.5), "b": np.arange(3), "c": [math.nan, np.inf], "d": np.int64(7),
-                   "e": (1, 2), "f": Path("p")}, path)
+                       "e": (1, 2), "f": Path("p")}, path)
     assert atomic.read_json(path) == {"a": 1.5, "b": [0, 1, 2], "c": [None, None], "d": 7, "e": [1, 2], "f": "p"}
     assert path.read_text().startswith('{\n  "a"')
     assert [p.name for p in path.parent.iterdir()] == ["x.json"]  # no temporary file left

@@ -105,6 +105,22 @@ def test_run_summary_design_headline():
     assert report.run_summary([_quant_summary("a")], ["a"], {})["analyses"]["design"] is None
 
 
+def test_run_summary_rig_headline():
+    rig = {"rig": "tool", "measured": "cui", "runs": ["r1", "r2", "r3"],
+           "splits": [{"split": "frequency", "test_runs": 1, "before_steady": 0.0136,
+                       "before_all": 0.0138, "after_steady": 0.00056, "after_all": 0.00077,
+                       "floor": 0.00022}],
+           "spread": {"scale": {"rel_dev": 0.05}, "torque_back:linear": {"rel_dev": 1.48}}}
+    run = report.run_summary([_quant_summary("a")], ["a"], {}, rigs=[rig])
+    row = run["analyses"]["rigs"]["rows"][0]
+    assert row["runs"] == 3 and row["not_pinned_down"] == ["torque_back:linear"]
+    text = report.summary_text(run)
+    assert ("tool/cui (3 runs), held out by frequency: 13.6 mrad -> 0.56 mrad steady, "
+            "0.77 mrad all (floor 0.22 mrad)") in text
+    assert "not pinned down across folds: torque_back:linear" in text
+    assert report.run_summary([_quant_summary("a")], ["a"], {})["analyses"]["rigs"] is None
+
+
 def test_summary_page_renders_through_the_report_template():
     # The report renders the page with Jinja, then docutils: markup in messages stays text.
     from docutils.core import publish_parts

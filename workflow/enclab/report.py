@@ -107,6 +107,19 @@ def _residuals(summaries: Sequence[Mapping]) -> dict | None:
             "rows": rows}
 
 
+def _rigs(blocks: Sequence[Mapping] | None, max_spread: float = 0.15) -> dict | None:
+    rows = []
+    for b in blocks or []:
+        splits = [{k: _num(s.get(k)) if k != "split" else s["split"]
+                   for k in ("split", "before_steady", "after_steady", "after_all", "floor")}
+                  for s in b.get("splits") or []]
+        loose = sorted(name for name, v in (b.get("spread") or {}).items()
+                       if _num(v.get("rel_dev")) is not None and v["rel_dev"] > max_spread)
+        rows.append({"rig": b["rig"], "measured": b["measured"], "runs": len(b.get("runs") or []),
+                     "splits": splits, "not_pinned_down": loose})
+    return {"rigs": len(rows), "rows": rows} if rows else None
+
+
 def _design(block: Mapping | None) -> dict | None:
     if not block:
         return None
@@ -128,7 +141,7 @@ def _design(block: Mapping | None) -> dict | None:
 def run_summary(summaries: Sequence[Mapping], log_ids: Sequence[str],
                 failures: Mapping[str, Mapping], *, ratios: pd.DataFrame | None = None,
                 violations: pd.DataFrame | None = None, design: Mapping | None = None,
-                written: Mapping[str, int] | None = None) -> dict:
+                rigs: Sequence[Mapping] | None = None, written: Mapping[str, int] | None = None) -> dict:
     """Condense a run into what ran, the headline numbers, failures and warnings.
 
     Parameters
@@ -143,6 +156,8 @@ def run_summary(summaries: Sequence[Mapping], log_ids: Sequence[str],
         ``results/batch/ratios.csv`` and ``results/batch/bound_violations.csv``.
     design : mapping, optional
         The ``design`` block of ``results/design/design.json``.
+    rigs : sequence of dict, optional
+        The ``rig.json`` of every rig and measured channel (``results/rigs/<rig>/<channel>/``).
     written : mapping, optional
         Counts of the files written, by kind (``{"summaries": 70, ...}``).
 
@@ -150,7 +165,7 @@ def run_summary(summaries: Sequence[Mapping], log_ids: Sequence[str],
     -------
     dict
         ``logs`` {total, completed, failed}, ``analyses`` {quantization, lrde, residuals,
-        design} (None for an analysis that did not run), ``failed`` [{log_id, stage, error}],
+        rigs, design} (None for an analysis that did not run), ``failed`` [{log_id, stage, error}],
         ``warnings`` [{log_id, warning}], ``written``.
     """
     completed = sorted(s["log_id"] for s in summaries)
@@ -166,7 +181,7 @@ def run_summary(summaries: Sequence[Mapping], log_ids: Sequence[str],
                  "failed": len(failed)},
         "analyses": {"quantization": _quantization(summaries, ratios, violations),
                      "lrde": _lrde(summaries), "residuals": _residuals(summaries),
-                     "design": _design(design)},
+                     "rigs": _rigs(rigs), "design": _design(design)},
         "failed": failed,
         "warnings": warnings,
         "written": dict(written or {}),
@@ -230,6 +245,19 @@ def _headlines(run: Mapping) -> list[tuple[str, list[str]]]:
             lines.append(f"{r['log_id']}/{r['measured']}: {r['verdict']}{ratio}; {effects}")
         out.append((f"residuals ({_count(res['channels'], 'channel')}, {res['explained']} explained)",
                     lines))
+    rigs = run["analyses"].get("rigs")
+    if rigs:
+        lines = []
+        for r in rigs["rows"]:
+            held = "; ".join(
+                f"by {x['split']}: {_angle(x['before_steady'])} -> {_angle(x['after_steady'])} "
+                f"steady, {_angle(x['after_all'])} all (floor {_angle(x['floor'])})"
+                for x in r["splits"])
+            lines.append(f"{r['rig']}/{r['measured']} ({r['runs']} runs), held out {held}")
+            if r["not_pinned_down"]:
+                lines.append(f"{r['rig']}/{r['measured']}: not pinned down across folds: "
+                             + ", ".join(r["not_pinned_down"]))
+        out.append((f"rigs ({_count(rigs['rigs'], 'channel')})", lines))
     design = run["analyses"].get("design")
     if design:
         budget = "; ".join(_budget_text(b) for b in design["budget"])

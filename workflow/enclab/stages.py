@@ -194,7 +194,7 @@ def log_figures(inputs: Mapping[str, PathLike], export: list, settle_tol: float,
     tr = analysis.error_traces(req, kin, deriv, meta, level, export, settle_tol)
     title = f"{meta['log_id']}: {tr['signal']} error at {level}"
     atomic.save_figure(plots.error_trace_figure(tr["t"], tr["errors"], title, tr["unit"],
-                                            step=tr["step"]), errors)
+                                                step=tr["step"]), errors)
     table = analysis.summary_table(summary_block)
     truth = analysis.truth_channels(meta)[0]
     native = truth.get("step") or truth.get("native_step")

@@ -327,4 +327,8 @@ def run_summary_inputs(wildcards):
     inputs["tables"] = tables
     if config.get("design"):
         inputs["design"] = "results/design/design.json"
+    rigs = [f"results/rigs/{name}/{p['measured']}/rig.json" for name, rig in RIGS.items()
+            for p in rig["pairs"]]
+    if rigs:
+        inputs["rigs"] = rigs
     return inputs

@@ -727,11 +727,11 @@ def _moments_command(args) -> int:
         # peaks need not coincide).
         peak = own + sum(peaks)
         atomic.write_json({"n_samples": int(meta["n_samples"]), "n_joints": len(levels[0]["joints"]),
-                       "n_levels": len(levels), "n_filters": len(bank), "n_rows": len(rows),
-                       "chunk_rows": args.chunk_rows, "workers": len(peaks) + 1,
-                       "stages_s": timings, "stages_note": "seconds summed over workers",
-                       "total_s": time.perf_counter() - t0,
-                       "peak_rss_mb": peak, "worker_peak_rss_mb": peaks}, args.timings)
+                           "n_levels": len(levels), "n_filters": len(bank), "n_rows": len(rows),
+                           "chunk_rows": args.chunk_rows, "workers": len(peaks) + 1,
+                           "stages_s": timings, "stages_note": "seconds summed over workers",
+                           "total_s": time.perf_counter() - t0,
+                           "peak_rss_mb": peak, "worker_peak_rss_mb": peaks}, args.timings)
     return 0
 
 
