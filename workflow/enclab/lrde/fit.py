@@ -39,7 +39,8 @@ ensembles, which move side by side in one sampler (``_EnsemblesMove``: one call 
 half-step for all of them, evaluated in cache-sized slices of walkers). On a uniform time
 grid the sine comes from block-wise complex rotation instead of ``np.sin``, and only samples
 within 8 standard deviations of an interval edge reach ``log_ndtr``
-(workflow/benchmarks/bench_lrde_throughput.py measures both against ``np.sin`` and a ``log_ndtr`` of every sample).
+(workflow/benchmarks/bench_lrde_throughput.py measures both against ``np.sin`` and a
+``log_ndtr`` of every sample).
 
 References
 ----------
