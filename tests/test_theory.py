@@ -509,6 +509,15 @@ def assert_pooled_within(per_trajectory, labels):
     assert np.all(np.abs(mean - 1) <= DETECT / 2), dict(zip(labels, (mean - 1).round(5)))
 
 
+def _family_responses():
+    """Impulse responses, their autocorrelations and settle lengths of FAMILIES, and the
+    longest autocorrelation lag."""
+    impulses = [impulse_response(f, FS, tol=1e-12) for f in FAMILIES]
+    r_hs = [impulse_autocorrelation(h) for h in impulses]
+    settles = [settle_samples(f, FS, tol=1e-12) for f in FAMILIES]
+    return impulses, r_hs, settles, max(r.size for r in r_hs) - 1
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("truth_step", [None, TRUTH_STEP])
 def test_exact_model_pooled_to_0p3_percent_every_family_joint(truth_step):
@@ -519,10 +528,7 @@ def test_exact_model_pooled_to_0p3_percent_every_family_joint(truth_step):
     rng = np.random.default_rng(70)
     n_traj, n_centres, n_samples = 6, 64, 10_000
     model = QuantizerErrorModel(STEP, truth_step=truth_step)
-    impulses = [impulse_response(f, FS, tol=1e-12) for f in FAMILIES]
-    r_hs = [impulse_autocorrelation(h) for h in impulses]
-    settles = [settle_samples(f, FS, tol=1e-12) for f in FAMILIES]
-    max_lag = max(r.size for r in r_hs) - 1
+    impulses, r_hs, settles, max_lag = _family_responses()
     t = np.arange(n_samples) / FS
     ratios = []
     for _ in range(n_traj):
@@ -557,10 +563,7 @@ def test_exact_model_pooled_to_0p3_percent_every_family_phantom():
     device = PhantomPremium15()
     n_traj, n_centres, n_samples = 8, 16, 4000
     model = QuantizerErrorModel(STEP, truth_step=TRUTH_STEP)
-    impulses = [impulse_response(f, FS, tol=1e-12) for f in FAMILIES]
-    r_hs = [impulse_autocorrelation(h) for h in impulses]
-    settles = [settle_samples(f, FS, tol=1e-12) for f in FAMILIES]
-    max_lag = max(r.size for r in r_hs) - 1
+    impulses, r_hs, settles, max_lag = _family_responses()
     velocity = [q for q, f in enumerate(FAMILIES) if f.d == 1]
     t = np.arange(n_samples)[:, None] / FS
     ratios = []

@@ -84,6 +84,8 @@ try:
             if all(r["log_id"] in LOG_IDS for r in rig["runs"])}
 except ValueError as err:
     raise WorkflowError(f"{config['manifest']}: {err}") from None
+# (rig, measured channel) of every rig fit: results/rigs/<rig>/<channel>/
+RIG_CHANNELS = [(name, p["measured"]) for name, rig in RIGS.items() for p in rig["pairs"]]
 
 
 def _first_of_groups(ids):
@@ -224,7 +226,7 @@ def all_targets():
                     for p in pairs for name in ("diagnostics.png", "before_after.png", "covariates.png")]
     if RESIDUAL_IDS:
         targets += ["results/batch/residuals.csv"]
-    targets += [f"results/rigs/{name}/{p['measured']}/report.md" for name, rig in RIGS.items() for p in rig["pairs"]]
+    targets += [f"results/rigs/{name}/{channel}/report.md" for name, channel in RIG_CHANNELS]
     if config.get("design"):
         targets += ["results/design/design.json", "results/design/designs.csv",
                     "results/design/pareto.png"]
@@ -275,8 +277,8 @@ def report_figures():
         "fig6": [{}] if paper_figures_apply() else [],
         "design_pareto": [{}] if config.get("design") else [],
         # a rig's thumbnails are named <rig>/<channel>.png (log_id = the rig's name)
-        "rig_map": [{"log_id": name, "rig": name, "channel": p["measured"]}
-                    for name, rig in RIGS.items() for p in rig["pairs"]],
+        "rig_map": [{"log_id": name, "rig": name, "channel": channel}
+                    for name, channel in RIG_CHANNELS],
     }
     for kind, same in (("log_comparison", "log_errors"), ("lrde_dwell", "lrde_corner"),
                        ("lrde_bias_cycles", "lrde_corner"),
@@ -327,8 +329,6 @@ def run_summary_inputs(wildcards):
     inputs["tables"] = tables
     if config.get("design"):
         inputs["design"] = "results/design/design.json"
-    rigs = [f"results/rigs/{name}/{p['measured']}/rig.json" for name, rig in RIGS.items()
-            for p in rig["pairs"]]
-    if rigs:
-        inputs["rigs"] = rigs
+    if RIG_CHANNELS:
+        inputs["rigs"] = [f"results/rigs/{name}/{channel}/rig.json" for name, channel in RIG_CHANNELS]
     return inputs

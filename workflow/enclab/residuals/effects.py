@@ -293,6 +293,17 @@ class Backlash(Effect):
         return {"play_width": abs(params["w"])}
 
 
+# An angle harmonic and a scale error differ only over a full turn: a harmonic returns, a
+# scale error grows. Over a shorter stroke both are a smooth error of the angle there.
+_FULL_TURN = "a motion over a full turn or more (a harmonic returns, a scale error grows)"
+
+
+def _stroke_below_a_turn(ctx) -> float | None:
+    """The truth's stroke (rad) when it is shorter than a turn, else None."""
+    stroke = float(np.ptp(ctx.truth))
+    return stroke if stroke < 2.0 * np.pi else None
+
+
 class AngleHarmonics(Effect):
     """Once- and twice-per-revolution error (eccentricity, tilt): four coefficients (rad).
 
@@ -306,11 +317,11 @@ class AngleHarmonics(Effect):
     param_names = ("a1", "b1", "a2", "b2")
     order = 20
 
-    separated_by = "a motion over a full turn or more (a harmonic returns, a scale error grows)"
+    separated_by = _FULL_TURN
 
     def caveat(self, ctx):
-        stroke = float(np.ptp(ctx.truth))
-        if stroke >= 2.0 * np.pi:
+        stroke = _stroke_below_a_turn(ctx)
+        if stroke is None:
             return None
         return (f"over a stroke of {stroke:.2g} rad the harmonic coefficients describe a smooth error of "
                 "the angle there, not the disc's run-out (a motion over a full turn pins them)")
@@ -480,11 +491,11 @@ class ScaleMismatch(Effect):
     param_names = ("g",)
     order = 21
 
-    separated_by = "a motion over a full turn or more (a harmonic returns, a scale error grows)"
+    separated_by = _FULL_TURN
 
     def caveat(self, ctx):
-        stroke = float(np.ptp(ctx.truth))
-        if stroke >= 2.0 * np.pi:
+        stroke = _stroke_below_a_turn(ctx)
+        if stroke is None:
             return None
         return (f"over a stroke of {stroke:.2g} rad the scale is the mean slope of the angle error there: "
                 "a once-per-turn error adds its local slope (a motion over a full turn separates them)")
