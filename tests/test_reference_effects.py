@@ -5,8 +5,8 @@ from enclab.reference_effects import lrde_reference, references_by_channel
 
 
 def _block(*effects, explained=True, measured="coarse"):
-    return {"measured": measured, "truth": "fine", "explained": explained,
-            "effects": list(effects)}
+    return {"measured": measured, "truth": "fine",
+            "selection": {"explained": explained, "effects": list(effects)}}
 
 
 def test_play_and_dead_band_are_one_term_of_the_same_width():
@@ -53,6 +53,8 @@ def test_blocks_are_keyed_by_measured_channel_and_a_malformed_one_is_named():
     refs = references_by_channel([_block(measured="a"), _block(measured="b")])
     assert sorted(refs) == ["a", "b"]
     with pytest.raises(ValueError, match="no measured channel"):
-        references_by_channel([{"effects": []}])
+        references_by_channel([{"selection": {"effects": []}}])
+    with pytest.raises(ValueError, match="channel 'c' has no 'selection'"):
+        lrde_reference({"measured": "c", "effects": []})
     with pytest.raises(ValueError, match="'w'"):
         lrde_reference(_block({"name": "backlash", "params": {"width": 1.0}}))

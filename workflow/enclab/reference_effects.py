@@ -61,8 +61,8 @@ def lrde_reference(residual_block: Mapping) -> dict:
     ----------
     residual_block : mapping
         One channel's ``residuals.json`` (:func:`enclab.residuals.pipeline.analyse_channel`):
-        ``measured``, ``truth``, ``explained``, ``effects`` (each ``name``, ``params``,
-        ``ci``).
+        ``measured``, ``truth`` and ``selection`` with ``explained`` and ``effects`` (each
+        ``name``, ``params``, ``ci``).
 
     Returns
     -------
@@ -76,8 +76,12 @@ def lrde_reference(residual_block: Mapping) -> dict:
     A single missed or extra count becomes the ``count_jump`` term; several become a
     ``not_modelled`` entry, since the model holds one jump.
     """
+    selection = residual_block.get("selection")
+    if not isinstance(selection, Mapping):
+        raise ValueError(f"the residuals block of channel {residual_block.get('measured')!r} "
+                         "has no 'selection'")
     found, not_modelled, terms = [], [], []
-    for effect in residual_block.get("effects") or []:
+    for effect in selection.get("effects") or []:
         name = effect.get("name")
         params = effect.get("params") or {}
         if name in _TERM:
@@ -108,7 +112,7 @@ def lrde_reference(residual_block: Mapping) -> dict:
         if entry["term"] not in terms:
             terms.append(entry["term"])
     return {"channel": residual_block.get("measured"), "truth": residual_block.get("truth"),
-            "explained": bool(residual_block.get("explained")), "effects": terms,
+            "explained": bool(selection.get("explained")), "effects": terms,
             "found": found, "not_modelled": not_modelled}
 
 
