@@ -243,6 +243,24 @@ def test_reference_terms_are_confirmed_or_named_as_standing_for_the_motion():
     assert report.reference_block(None, model_block, added=[]) is None
 
 
+def test_an_effect_the_model_cannot_hold_flags_the_estimates_it_biases():
+    from types import SimpleNamespace
+
+    fit_stub = SimpleNamespace(converged=True, summary={k: {"median": 0.0} for k in
+                                                        ("A12", "E_b", "a_eq", "f_hz",
+                                                         "offset_a", "bias_b")})
+    drift = {"residual_effect": "slow_drift", "why": "a_eq is constant",
+             "biases": ["a_eq", "E_b", "offset_a"]}
+    block = {"check": {}, "reference": {"truth": "fine", "explained": True,
+                                        "not_modelled": [drift]}}
+    trust = report.trust_block(fit_stub, block)
+    assert [k for k, v in trust.items() if not v["trusted"]] == ["E_b", "a_eq", "offset_a"]
+    assert "slow_drift" in trust["a_eq"]["reason"]
+    block["reference"] = {"truth": "fine", "explained": False, "not_modelled": []}
+    assert not any(v["trusted"] for v in report.trust_block(fit_stub, block).values())
+    assert all(v["trusted"] for v in report.trust_block(fit_stub, {"check": {}}).values())
+
+
 @pytest.mark.slow
 def test_an_effect_found_against_the_truth_channel_enters_the_fit():
     """The readings alone are not compared (no candidate), but the residual stage found a
@@ -252,7 +270,8 @@ def test_an_effect_found_against_the_truth_channel_enters_the_fit():
                  "effects": ["hysteresis"],
                  "found": [{"term": "hysteresis", "residual_effect": "backlash",
                             "value": STEP / 8, "ci": [0.98 * STEP / 8, 1.02 * STEP / 8]}],
-                 "not_modelled": [{"residual_effect": "latency", "why": "phase only"}]}
+                 "not_modelled": [{"residual_effect": "latency", "why": "phase only",
+                                   "biases": []}]}
     settings = dict(FAST, motion_models=[[]], effects=[], n_steps=150, n_burn=60)
     block, _, md, _ = pipeline.analyse_lrde_log(df, meta, seed=3, settings=settings,
                                                 references={"coarse": reference})

@@ -42,6 +42,9 @@ def test_effects_without_a_term_are_listed_with_the_reason():
     why = {e["residual_effect"]: e["why"] for e in ref["not_modelled"]}
     assert "phase" in why["latency"] and why["something_new"]
     assert not ref["explained"]
+    biases = lrde_reference(_block({"name": "slow_drift", "params": {"c1": 1e-4}},
+                                   {"name": "latency", "params": {"tau": 1e-3}}))
+    assert [e["biases"] for e in biases["not_modelled"]] == [["a_eq", "E_b", "offset_a"], []]
 
 
 def test_a_clean_channel_adds_nothing():

@@ -44,6 +44,16 @@ _NO_TERM = {
 }
 
 
+# Effects without a term that break an assumption the estimates rest on: the quantities they
+# bias. (The others shift only the phase, rescale the stroke as read, or distort the motion as
+# a harmonic would, which the comparison's motion terms cover.)
+_BREAKS = {
+    "slow_drift": ("a_eq", "E_b", "offset_a"),          # a_eq is constant in the model
+    "quadrature_edges": ("A12", "a_eq", "E_b", "offset_a"),  # the levels are evenly spaced
+    "missed_counts": ("a_eq", "E_b", "offset_a"),       # more than the one modelled jump
+}
+
+
 def _interval(effect: Mapping, key: str) -> list[float] | None:
     ci = (effect.get("ci") or {}).get(key)
     if ci is None:
@@ -70,8 +80,8 @@ def lrde_reference(residual_block: Mapping) -> dict:
         ``channel`` and ``truth`` (names), ``explained`` (the residual stage's verdict),
         ``effects`` (the low-resolution terms to add, in the order found, each once),
         ``found`` (per term: ``term``, ``residual_effect``, ``value`` and ``ci`` in SI units),
-        ``not_modelled`` (per residual-stage effect without a term: ``residual_effect`` and
-        ``why``).
+        ``not_modelled`` (per residual-stage effect without a term: ``residual_effect``,
+        ``why`` and ``biases``, the estimates it breaks an assumption of).
 
     A single missed or extra count becomes the ``count_jump`` term; several become a
     ``not_modelled`` entry, since the model holds one jump.
@@ -98,7 +108,8 @@ def lrde_reference(residual_block: Mapping) -> dict:
                     "residual_effect": name,
                     "why": f"{len(jumps)} count steps found (sizes "
                            f"{', '.join(f'{float(j):+.0f}' for j in jumps)}); the model holds "
-                           "one step of one count"})
+                           "one step of one count",
+                    "biases": list(_BREAKS[name])})
                 continue
             entry = {"term": "count_jump", "residual_effect": name,
                      "value": float(params.get("t_1", float("nan"))), "ci": None,
@@ -106,7 +117,8 @@ def lrde_reference(residual_block: Mapping) -> dict:
         else:
             not_modelled.append({"residual_effect": name,
                                  "why": _NO_TERM.get(name, "no term of the low-resolution "
-                                                           "model describes it")})
+                                                           "model describes it"),
+                                 "biases": list(_BREAKS.get(name, ()))})
             continue
         found.append(entry)
         if entry["term"] not in terms:

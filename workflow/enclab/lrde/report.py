@@ -281,8 +281,10 @@ def trust_block(fit, model_block: dict) -> dict:
     """Per reported quantity ``{trusted, reason}``.
 
     A quantity is untrusted when the chosen model fails the predictive check (its readings
-    are explained worse than its own simulations are), when its sampler did not converge, or
-    (``offset_a``, ``bias_b``) when it is not identified at all.
+    are explained worse than its own simulations are), when its sampler did not converge,
+    when the truth channel (``model_block["reference"]``) shows an effect that breaks an
+    assumption the quantity rests on or leaves the readings unexplained, or (``offset_a``,
+    ``bias_b``) when it is not identified at all.
     """
     reasons = []
     check = model_block.get("check") or {}
@@ -292,9 +294,15 @@ def trust_block(fit, model_block: dict) -> dict:
                        "deviations below its own simulated readings")
     if not fit.converged:
         reasons.append("the sampler did not converge (R-hat > 1.01 or ESS < 1000)")
+    ref = model_block.get("reference") or {}
+    if ref and not ref.get("explained", True):
+        reasons.append(f"against the truth channel ({ref.get('truth')}) the readings hold more "
+                       "than any named effect explains")
     out = {}
     for key in _ESTIMATES:
         r = list(reasons)
+        r += [f"the truth channel shows {e['residual_effect']}, which this model has no term "
+              f"for ({e['why']})" for e in ref.get("not_modelled", []) if key in e["biases"]]
         if fit.summary.get(key) is None:
             r = ["not identified (readings give only a_eq = a + b)"]
         out[key] = {"trusted": not r, "reason": "; ".join(r) if r else None}
