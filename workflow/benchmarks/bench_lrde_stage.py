@@ -10,6 +10,7 @@ Usage::
     python workflow/benchmarks/bench_lrde_stage.py --repeats 3
     PYTHONPATH=<other checkout>/workflow python workflow/benchmarks/bench_lrde_stage.py \\
         --label other   # the same logs with another version of the package
+    python workflow/benchmarks/bench_lrde_stage.py --threads 2 --logs lrde_closed_r01
 
 Writes ``<out>/lrde_stage.csv`` (appends rows).
 """
@@ -35,6 +36,9 @@ def main(argv=None) -> None:
     ap.add_argument("--repeats", type=int, default=1)
     ap.add_argument("--label", default="this")
     ap.add_argument("--out", default=str(ROOT / "results" / "benchmarks"))
+    ap.add_argument("--threads", type=int, default=1,
+                    help="processes for the before and after fits (analyse_lrde_log threads)")
+    ap.add_argument("--logs", nargs="*", default=None, help="only these log ids")
     args = ap.parse_args(argv)
     import enclab
     from enclab.core import ingest, readers
@@ -47,20 +51,24 @@ def main(argv=None) -> None:
     for entry in entries:
         if "lrde" not in ((entry.get("analysis") or {}).get("stages") or []):
             continue
+        if args.logs is not None and entry["id"] not in args.logs:
+            continue
         df, meta = ingest.ingest_log(entry, data_root, devices)
         settings = dict(config.get("lrde") or {})
         settings.update((entry.get("analysis") or {}).get("lrde") or {})
         seed = [int(settings.pop("seed", 0)), zlib.crc32(meta["log_id"].encode())]
         for r in range(args.repeats):
             started = time.perf_counter()
-            block, figures, _, _ = analyse_lrde_log(df, meta, seed, settings)
+            # Older versions of the package have no threads argument.
+            extra = {} if args.threads == 1 else {"threads": args.threads}
+            block, figures, _, _ = analyse_lrde_log(df, meta, seed, settings, **extra)
             wall = time.perf_counter() - started
             for fig in figures.values():
                 fig.clear()
             model = (block.get("model") or {}).get("chosen")
             trust = block.get("trust") or {}
             rows.append({"label": args.label, "package": str(pathlib.Path(enclab.__file__).parent),
-                         "log_id": meta["log_id"], "samples": len(df), "repeat": r,
+                         "log_id": meta["log_id"], "samples": len(df), "threads": args.threads, "repeat": r,
                          "wall_s": wall, "model": model,
                          "A12_trusted": (trust.get("A12") or {}).get("trusted"),
                          "converged": block["diagnostics"]["converged"]})

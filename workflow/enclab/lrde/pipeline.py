@@ -33,7 +33,9 @@ whether it can be relied on and why not.
 """
 from __future__ import annotations
 
+import concurrent.futures
 import logging
+import multiprocessing as mp
 
 import numpy as np
 import pandas as pd
@@ -86,6 +88,24 @@ def _compare_effects(t, counts, step, seed, settings) -> tuple:
         _log.warning("effects not compared: %s", err)
         return report.effect_model_block(None, reason=str(err)), None
     return None, comparison
+
+
+def _fit(t, counts, step, seed, kwargs):
+    return fit.fit_sinusoid(t, counts, step, seed, **kwargs)
+
+
+def _run_fits(t, counts, step, before, after, threads):
+    """The ``before`` fit and, when ``after`` is given, the ``after`` fit (``(seed, kwargs)``
+    each); side by side in a forked worker process when ``threads >= 2``."""
+    if after is None or threads < 2 or "fork" not in mp.get_all_start_methods():
+        return (_fit(t, counts, step, *before),
+                None if after is None else _fit(t, counts, step, *after))
+    with concurrent.futures.ProcessPoolExecutor(
+            max_workers=1, mp_context=mp.get_context("fork")) as pool:
+        # The longer fit (the richer model) stays in this process.
+        pending = pool.submit(_fit, t, counts, step, *before)
+        chosen = _fit(t, counts, step, *after)
+        return pending.result(), chosen
 
 
 def select_channels(df: pd.DataFrame, meta: dict, settings: dict):
@@ -143,7 +163,7 @@ def select_channels(df: pd.DataFrame, meta: dict, settings: dict):
                                  "requantized": True}
 
 
-def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict):
+def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict, threads: int = 1):
     """Dwell baselines and the Bayesian fit of one canonical log.
 
     Parameters
@@ -157,6 +177,10 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict):
         Root seed of the fit and of the posterior-predictive draws.
     settings : dict
         See the module docstring.
+    threads : int
+        Processes for the two emcee fits: with 2 or more, the paper's sinusoid (``before``)
+        and the chosen model (``after``) are sampled at the same time (they depend only on
+        the comparison and their own seeds, so the results are the same as with 1).
 
     Returns
     -------
@@ -186,26 +210,24 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict):
     # The comparison first: its point fit of the sinusoid starts the ensembles near the
     # posterior, so that a short burn-in suffices.
     model_block, comparison = _compare_effects(t, counts, step, compare_seed, settings)
-    result = fit.fit_sinusoid(
-        t, counts, step, fit_seed, f_hz=f_hz,
-        truth=truth if settings.get("use_truth", True) else None,
-        rest_position=settings.get("rest_position"),
-        start=None if comparison is None else comparison["full_fits"]["sinusoid"]["x"],
-        **_sampler_settings(settings))
+    common = {"f_hz": f_hz, "truth": truth if settings.get("use_truth", True) else None,
+              "rest_position": settings.get("rest_position"), **_sampler_settings(settings)}
+    before_kw = {"start": None if comparison is None
+                 else comparison["full_fits"]["sinusoid"]["x"], **common}
+    after_kw = None
+    if comparison is not None and comparison["chosen"] != "sinusoid":
+        point = comparison["full_fits"][comparison["chosen"]]
+        after_kw = {"harmonics": tuple(comparison["chosen_harmonics"]),
+                    "effects": tuple(comparison["chosen_effects"]), "start": point["x"],
+                    **common}
+    result, chosen_fit = _run_fits(t, counts, step, (fit_seed, before_kw),
+                                   None if after_kw is None else (after_seed, after_kw), threads)
     # The wall time goes to the log, not the block: summary.json must be byte-reproducible.
     _log.info("emcee fit: %.1f s wall, acceptance %.2f", result.wall_time_s, result.acceptance)
     before = result
     if comparison is not None:
-        chosen_fit, jump = None, None
-        if comparison["chosen"] != "sinusoid":
-            point = comparison["full_fits"][comparison["chosen"]]
-            chosen_fit = fit.fit_sinusoid(
-                t, counts, step, after_seed, f_hz=f_hz,
-                truth=truth if settings.get("use_truth", True) else None,
-                rest_position=settings.get("rest_position"),
-                harmonics=tuple(comparison["chosen_harmonics"]),
-                effects=tuple(comparison["chosen_effects"]), start=point["x"],
-                **_sampler_settings(settings))
+        jump = None
+        if chosen_fit is not None:
             _log.info("emcee fit of %s: %.1f s wall", comparison["chosen"],
                       chosen_fit.wall_time_s)
             if "count_jump" in comparison["chosen_effects"]:
