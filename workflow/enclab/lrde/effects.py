@@ -42,7 +42,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.special import log_ndtr, logsumexp
+from scipy.special import erfc, log_ndtr, logsumexp
 
 from enclab.lrde import model
 
@@ -173,30 +173,44 @@ def _log_interval(lo, hi):
 
 
 _DEEP = 8.0
+_SQRT_HALF = np.sqrt(0.5)
 
 
 def _log_interval_sparse(lower, upper):
     """``log(Phi(upper) - Phi(lower))`` at the entries where it differs from 0 noticeably.
 
     Returns the flat indices of those entries and their values; every other entry has
-    ``lower < -8`` and ``upper > 8`` and its value is above ``-1.3e-15``. Where only one
-    bound is near and the interval reaches past 0 (``lower < -8 <= 0 <= upper``, or the
-    mirror image) the far bound's ``Phi(-8) = 6.2e-16`` is dropped against a probability
-    above 1/2, and one ``log_ndtr`` gives the value; all other entries take the exact
-    two-bound form (:func:`_log_interval`), whatever the width of their interval.
+    ``lower < -8`` and ``upper > 8`` and its value is above ``-1.3e-15``. The others, by kind:
+
+    - one bound beyond 8 standard deviations and the interval reaching past 0
+      (``lower < -8``, ``upper >= 0``, or the mirror image): the far bound's
+      ``Phi(-8) = 6.2e-16`` is dropped against a probability above 1/2, and
+      ``log Phi(x) = log1p(-erfc(x / sqrt 2) / 2)`` for the near bound ``x >= 0``;
+    - both bounds within 8: ``log`` of the difference of the two tail probabilities
+      (``erfc``) on the side of 0 where both are smallest (``Q(l) - Q(u)`` when ``u > 0``,
+      else ``Phi(u) - Phi(l)``), which keeps full relative precision (no tail value is below
+      ``Phi(-8)``, so none underflows);
+    - the rest (an interval entirely beyond 8 on one side): the exact reflected form
+      :func:`_log_interval`.
     """
-    lo_deep = lower < -_DEEP
-    up_deep = upper > _DEEP
-    keep = np.flatnonzero(~(lo_deep & up_deep))
+    lo_near = lower >= -_DEEP
+    up_near = upper <= _DEEP
+    keep = np.flatnonzero(lo_near | up_near)
     lo, up = lower.ravel()[keep], upper.ravel()[keep]
-    only_up = lo_deep.ravel()[keep] & (up >= 0.0)
-    only_lo = up_deep.ravel()[keep] & (lo <= 0.0)
+    lo_near, up_near = lo_near.ravel()[keep], up_near.ravel()[keep]
+    both = lo_near & up_near
+    single = ~both & np.where(lo_near, lo <= 0.0, up >= 0.0)
     vals = np.empty(keep.size)
-    one = only_up | only_lo
-    vals[one] = log_ndtr(np.where(only_up[one], up[one], -lo[one]))
-    two = ~one
-    if np.any(two):
-        vals[two] = _log_interval(lo[two], up[two])
+    x = np.where(lo_near[single], -lo[single], up[single])
+    vals[single] = np.log1p(-0.5 * erfc(x * _SQRT_HALF))
+    up_pos = up[both] > 0.0
+    a = np.where(up_pos, lo[both], -up[both])
+    b = np.where(up_pos, up[both], -lo[both])
+    with np.errstate(divide="ignore"):
+        vals[both] = np.log(0.5 * (erfc(a * _SQRT_HALF) - erfc(b * _SQRT_HALF)))
+    rest = ~(both | single)
+    if np.any(rest):
+        vals[rest] = _log_interval(lo[rest], up[rest])
     return keep, vals
 
 

@@ -60,8 +60,8 @@ import numpy as np
 from scipy.special import log_ndtr
 
 from enclab.lrde import diagnostics, dwell, model
-from enclab.lrde.model import _phasor_on_grid, _sine_on_grid, uniform_grid  # noqa: F401
 from enclab.lrde import effects as lrde_effects
+from enclab.lrde.model import _phasor_on_grid, _sine_on_grid, uniform_grid
 
 __all__ = ["PARAM_NAMES", "FitResult", "log_likelihood", "log_probability", "initial_guess",
            "fit_sinusoid"]
@@ -195,21 +195,13 @@ def log_likelihood(params, t, counts, step, centre_count, t_ref, grid=None, harm
 def _log_interval_prob_scaled(lower, inv_s):
     """Row sums of ``log(Phi(lower + inv_s) - Phi(lower))`` (intervals of width ``1/s``).
 
-    Same values as :func:`_log_interval_prob` on the entries with a bound within ``_DEEP`` of
-    0 (the others contribute less than ``Phi(-8) = 6.2e-16`` each): one ``log_ndtr`` per entry
-    with a single near bound, the full two-bound form only where both are near.
+    Entries with both bounds beyond ``_DEEP`` of 0 are skipped (each above ``-1.3e-15``); an
+    entry with a single near bound costs one ``log_ndtr``, the others the exact two-bound
+    form (:func:`enclab.lrde.effects._log_interval_sparse`).
     """
-    flat, n_cols = lower.ravel(), lower.shape[1]
-    near = np.flatnonzero((lower >= -_DEEP) | (lower <= _DEEP - inv_s))
-    rows = near // n_cols
-    lo = flat[near]
-    up = lo + np.ravel(inv_s)[rows]
-    lower_near = lo >= -_DEEP
-    vals = log_ndtr(np.where(lower_near, -lo, up))
-    both = lower_near & (up <= _DEEP)
-    if np.any(both):
-        vals[both] = _log_interval_prob(lo[both], up[both])
-    return np.bincount(rows, weights=vals, minlength=lower.shape[0])
+    upper = lower + inv_s
+    keep, vals = lrde_effects._log_interval_sparse(lower, upper)
+    return np.bincount(keep // lower.shape[1], weights=vals, minlength=lower.shape[0])
 
 
 def log_probability(params, t, counts, step, centre_count, t_ref, bounds, grid=None,
