@@ -3,7 +3,7 @@
 Every log of the manifest whose ``analysis.stages`` holds ``lrde`` is ingested and run through
 :func:`enclab.lrde.pipeline.analyse_lrde_log` with ``config.yaml``'s ``lrde`` settings (and
 the log's own ``analysis.lrde``), as the ``lrde_fit`` rule does, ``--repeats`` times; the
-chosen model and the trust flags are recorded with the time.
+chosen model, the trust flags and a digest of the block are recorded with the time.
 
 Usage::
 
@@ -17,6 +17,8 @@ Writes ``<out>/lrde_stage.csv`` (appends rows).
 from __future__ import annotations
 
 import argparse
+import hashlib
+import json
 import pathlib
 import sys
 import time
@@ -71,7 +73,11 @@ def main(argv=None) -> None:
                          "log_id": meta["log_id"], "samples": len(df), "threads": args.threads, "repeat": r,
                          "wall_s": wall, "model": model,
                          "A12_trusted": (trust.get("A12") or {}).get("trusted"),
-                         "converged": block["diagnostics"]["converged"]})
+                         "converged": block["diagnostics"]["converged"],
+                         # Same digest across repeats and thread counts: the block (and so
+                         # summary.json) does not depend on timing or on the process layout.
+                         "block_sha256": hashlib.sha256(json.dumps(
+                             block, sort_keys=True, default=str).encode()).hexdigest()[:16]})
             print(rows[-1], flush=True)
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
