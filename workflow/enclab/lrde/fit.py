@@ -38,9 +38,12 @@ The log-likelihood is vectorised over walkers (``vectorize=True``) and over the 
 ensembles, which move side by side in one sampler (``_EnsemblesMove``: one call per
 half-step for all of them, evaluated in cache-sized slices of walkers). On a uniform time
 grid the sine comes from block-wise complex rotation instead of ``np.sin``, and only samples
-within 8 standard deviations of an interval edge reach ``log_ndtr``
+within 8 standard deviations of an interval edge reach a special function
 (workflow/benchmarks/bench_lrde_throughput.py measures both against ``np.sin`` and a
-``log_ndtr`` of every sample).
+``log_ndtr`` of every sample): one ``erfc`` where a single edge is near, two where both are
+(:func:`enclab.lrde.effects._log_interval_sparse`). The effect models' likelihood
+(:mod:`enclab.lrde.effects`) shares both, and takes the harmonics ``cos k phi, sin k phi``
+as powers of the phase factor.
 
 References
 ----------
