@@ -35,7 +35,9 @@ the coarse channel (``references``) joins the final model and is set against its
 """
 from __future__ import annotations
 
+import concurrent.futures
 import logging
+import multiprocessing as mp
 
 import numpy as np
 import pandas as pd
@@ -88,6 +90,24 @@ def _compare_effects(t, counts, step, seed, settings) -> tuple:
         _log.warning("effects not compared: %s", err)
         return report.effect_model_block(None, reason=str(err)), None
     return None, comparison
+
+
+def _fit(t, counts, step, seed, kwargs):
+    return fit.fit_sinusoid(t, counts, step, seed, **kwargs)
+
+
+def _run_fits(t, counts, step, before, after, threads):
+    """The ``before`` fit and, when ``after`` is given, the ``after`` fit (``(seed, kwargs)``
+    each); side by side in a forked worker process when ``threads >= 2``."""
+    if after is None or threads < 2 or "fork" not in mp.get_all_start_methods():
+        return (_fit(t, counts, step, *before),
+                None if after is None else _fit(t, counts, step, *after))
+    with concurrent.futures.ProcessPoolExecutor(
+            max_workers=1, mp_context=mp.get_context("fork")) as pool:
+        # The longer fit (the richer model) stays in this process.
+        pending = pool.submit(_fit, t, counts, step, *before)
+        chosen = _fit(t, counts, step, *after)
+        return pending.result(), chosen
 
 
 def select_channels(df: pd.DataFrame, meta: dict, settings: dict):
@@ -146,7 +166,7 @@ def select_channels(df: pd.DataFrame, meta: dict, settings: dict):
 
 
 def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
-                     references: dict | None = None):
+                     references: dict | None = None, threads: int = 1):
     """Dwell baselines and the Bayesian fit of one canonical log.
 
     Parameters
@@ -165,6 +185,10 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
         (:func:`enclab.reference_effects.lrde_reference`). The encoder and clock terms it
         names enter the final fit even when the held-out comparison did not choose them, and
         the report sets each term of the fit against the reference (``model.reference``).
+    threads : int
+        Processes for the two emcee fits: with 2 or more, the paper's sinusoid (``before``)
+        and the final model (``after``) are sampled at the same time (they depend only on
+        the comparison and their own seeds, so the results are the same as with 1).
 
     Returns
     -------
@@ -195,40 +219,37 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
     # posterior, so that a short burn-in suffices.
     model_block, comparison = _compare_effects(t, counts, step, compare_seed, settings)
     reference = (references or {}).get(info["measured"]) if info["measured"] else None
-    result = fit.fit_sinusoid(
-        t, counts, step, fit_seed, f_hz=f_hz,
-        truth=truth if settings.get("use_truth", True) else None,
-        rest_position=settings.get("rest_position"),
-        start=None if comparison is None else comparison["full_fits"]["sinusoid"]["x"],
-        **_sampler_settings(settings))
-    # The wall time goes to the log, not the block: summary.json must be byte-reproducible.
-    _log.info("emcee fit: %.1f s wall, acceptance %.2f", result.wall_time_s, result.acceptance)
-    before = result
     harmonics = tuple(comparison["chosen_harmonics"]) if comparison else ()
     chosen = tuple(comparison["chosen_effects"]) if comparison else ()
     added = [e for e in (reference or {}).get("effects", [])
              if e in lrde_effects.EFFECTS and e not in chosen]
+    common = {"f_hz": f_hz, "truth": truth if settings.get("use_truth", True) else None,
+              "rest_position": settings.get("rest_position"), **_sampler_settings(settings)}
+    before_kw = {"start": None if comparison is None
+                 else comparison["full_fits"]["sinusoid"]["x"], **common}
+    point, after_kw = None, None
+    if added:
+        # The truth channel saw an effect the readings alone did not resolve: the final
+        # model is the comparison's choice plus that effect, from its own optimum.
+        point = fit.map_fit(t, counts, step, f_hz=f_hz, harmonics=harmonics,
+                            effects=chosen + tuple(added),
+                            start=None if comparison is None
+                            else comparison["full_fits"][comparison["chosen"]]["x"],
+                            sigma_range=settings.get("sigma_range_steps"),
+                            sigma_prior=settings.get("sigma_prior", "uniform"))
+    elif harmonics or chosen:
+        point = comparison["full_fits"][comparison["chosen"]]
+    if point is not None:
+        after_kw = {"harmonics": harmonics, "effects": chosen + tuple(added),
+                    "start": point["x"], **common}
+    result, chosen_fit = _run_fits(t, counts, step, (fit_seed, before_kw),
+                                   None if after_kw is None else (after_seed, after_kw), threads)
+    # The wall time goes to the log, not the block: summary.json must be byte-reproducible.
+    _log.info("emcee fit: %.1f s wall, acceptance %.2f", result.wall_time_s, result.acceptance)
+    before = result
     if comparison is not None or added:
-        chosen_fit, jump = None, None
-        if harmonics or chosen or added:
-            if added:
-                # The truth channel saw an effect the readings alone did not resolve: the
-                # final model is the comparison's choice plus that effect, from its own optimum.
-                point = fit.map_fit(
-                    t, counts, step, f_hz=f_hz, harmonics=harmonics,
-                    effects=chosen + tuple(added),
-                    start=None if comparison is None
-                    else comparison["full_fits"][comparison["chosen"]]["x"],
-                    sigma_range=settings.get("sigma_range_steps"),
-                    sigma_prior=settings.get("sigma_prior", "uniform"))
-            else:
-                point = comparison["full_fits"][comparison["chosen"]]
-            chosen_fit = fit.fit_sinusoid(
-                t, counts, step, after_seed, f_hz=f_hz,
-                truth=truth if settings.get("use_truth", True) else None,
-                rest_position=settings.get("rest_position"),
-                harmonics=harmonics, effects=chosen + tuple(added), start=point["x"],
-                **_sampler_settings(settings))
+        jump = None
+        if chosen_fit is not None:
             _log.info("emcee fit of %s: %.1f s wall", "+".join(
                 [f"harmonic{k}" for k in harmonics] + list(chosen + tuple(added))),
                 chosen_fit.wall_time_s)
