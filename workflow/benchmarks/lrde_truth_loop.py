@@ -94,10 +94,10 @@ def one_draw(case, n_cycles, seed, settings):
     ref = lrde_reference(res_block)
     row["residual_wall_s"] = time.perf_counter() - started
     row["residual_found"] = "|".join(f["residual_effect"] for f in ref["found"])
-    alone_effects = None
+    block = None
     for label, refs in (("alone", None), ("loop", {"coarse": ref})):
         started = time.perf_counter()
-        if label == "loop" and set(ref["effects"]) <= alone_effects:
+        if block is not None and set(ref["effects"]) <= set(block["model"].get("effects") or []):
             # nothing to add: the stage's fit is the one without the reference (same seed)
             block = dict(block, model=dict(block["model"], reference={
                 "added": [], "terms": [{"term": e, "status": "found by both",
@@ -107,7 +107,6 @@ def one_draw(case, n_cycles, seed, settings):
             block, _, _, _ = pipeline.analyse_lrde_log(df, meta, seed, dict(settings),
                                                        references=refs)
             row[f"{label}_wall_s"] = time.perf_counter() - started
-        alone_effects = set(block["model"].get("effects") or [])
         m = block["model"]
         row[f"{label}_chosen"] = m.get("chosen")
         row[f"{label}_model"] = block["after"]["model"]

@@ -67,7 +67,7 @@ from enclab.lrde import effects as lrde_effects
 from enclab.lrde.model import _phasor_on_grid, _sine_on_grid, uniform_grid
 
 __all__ = ["PARAM_NAMES", "FitResult", "log_likelihood", "log_probability", "initial_guess",
-           "fit_sinusoid"]
+           "fit_sinusoid", "truth_rounding_bound"]
 
 PARAM_NAMES = ("A12", "E_b", "f_hz", "phase", "sigma")
 _HARMONIC_BOUND = 0.5  # |c_k|, |s_k| < step / 2: distortion well below the stroke
@@ -565,10 +565,33 @@ def _chain_diagnostics(internal: np.ndarray, names) -> tuple[dict, dict, dict]:
     return tau, rhat, ess
 
 
+def truth_rounding_bound(amplitude, truth_step, n_terms=4000) -> float:
+    """Bound of the mean rounding error of a sine read by a uniform quantizer of step ``s``.
+
+    The error ``s round(theta/s) - theta`` is the sawtooth ``sum_k (s / (pi k)) (-1)^k
+    sin(2 pi k theta / s)``; averaged over the phase of ``theta = b + A sin(phi)`` each term
+    becomes ``J0(2 pi k A / s) sin(2 pi k b / s)``, so whatever ``b`` the mean error is at most
+    ``(s / pi) sum_k |J0(2 pi k A / s)| / k`` (the series converges as ``k^-3/2``; the tail
+    after ``n_terms`` is bounded by its asymptote and added), and never more than ``s / 2``.
+    """
+    from scipy.special import j0
+
+    amplitude, s = abs(float(amplitude)), float(truth_step)
+    if not (np.isfinite(amplitude) and np.isfinite(s) and s > 0):
+        raise ValueError(f"amplitude and truth_step must be finite, truth_step > 0; got "
+                         f"{amplitude!r}, {truth_step!r}")
+    k = np.arange(1, int(n_terms) + 1)
+    head = float(np.sum(np.abs(j0(2.0 * np.pi * k * amplitude / s)) / k))
+    # |J0(x)| <= sqrt(2 / (pi x)) for large x: the tail sum_{k > n} k^-3/2 < 2 / sqrt(n).
+    tail = (np.sqrt(2.0 / (np.pi * 2.0 * np.pi * amplitude / s)) * 2.0 / np.sqrt(n_terms)
+            if amplitude > 0 else 0.0)
+    return min(s / np.pi * (head + tail), 0.5 * s)  # never more than half a step
+
+
 def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250, n_burn=150,
                  f_hz=None, truth=None, rest_position=None, sigma_range=None,
                  sigma_prior="uniform", moves="de", harmonics=(), effects=(),
-                 start=None, max_steps=None) -> FitResult:
+                 start=None, max_steps=None, truth_step=None) -> FitResult:
     """Posterior of stroke, bias deviation, frequency, phase and noise from coarse counts.
 
     Parameters
@@ -599,6 +622,10 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
         The motion centre ``b`` in the encoder's frame when it is known by construction (e.g.
         0 when the drive oscillates about the angle where the counter was zeroed); gives
         ``a = a_eq - rest_position``. Ignored when ``truth`` is given.
+    truth_step : float, optional
+        Step (rad) of a quantized truth channel. The mean of its rounding error over the
+        motion is a bias of ``b``, not noise, so it is not in the residual's standard error;
+        ``b``'s interval is widened by its bound (:func:`truth_rounding_bound`).
     sigma_range : (float, float), optional
         Prior range of the position jitter ``sigma`` in steps, default ``(1e-4, 10**-0.5)``.
         A lab that knows its jitter closely can give it here.
@@ -714,8 +741,12 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
         n_batches = int(min(20, max(2, t.size // 10)))
         batch_means = np.array([chunk.mean() for chunk in np.array_split(resid, n_batches)])
         b_se = float(batch_means.std(ddof=1) / np.sqrt(n_batches))
-        b_draws = b_hat + b_se * np.random.default_rng(root.spawn(1)[0]).standard_t(
-            n_batches - 1, a_eq.size)
+        rng = np.random.default_rng(root.spawn(1)[0])
+        b_draws = b_hat + b_se * rng.standard_t(n_batches - 1, a_eq.size)
+        if truth_step is not None:
+            # Unknown within its bound: uniform over it, on top of the statistical part.
+            bound = truth_rounding_bound(float(np.hypot(coef[1], coef[2])), truth_step)
+            b_draws = b_draws + bound * rng.uniform(-1.0, 1.0, a_eq.size)
         bias_b = _quantiles(b_draws)
         offset_a = _quantiles(a_eq - b_draws)
         reason = ("bias b from the truth channel (least-squares intercept at the posterior "

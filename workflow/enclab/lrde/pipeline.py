@@ -120,7 +120,8 @@ def select_channels(df: pd.DataFrame, meta: dict, settings: dict):
     truth : numpy.ndarray or None
         True angle in rad, or None.
     info : dict
-        ``measured`` and ``truth`` channel names and ``requantized`` (bool).
+        ``measured`` and ``truth`` channel names, ``requantized`` (bool) and ``truth_step``
+        (the truth channel's step in rad when it is stored as counts, else None).
     """
     channels = meta.get("channels")
     if not channels:
@@ -143,6 +144,8 @@ def select_channels(df: pd.DataFrame, meta: dict, settings: dict):
         truths = same_joint or truths
     truth_ch = truths[0] if truths else None
     truth = _angle(df, truth_ch) if truth_ch is not None else None
+    truth_step = (float(truth_ch["step"]) if truth_ch is not None
+                  and truth_ch.get("storage") == "counts" and truth_ch.get("step") else None)
     if measured is not None:
         if measured.get("storage") != "counts" or not measured.get("step"):
             raise ValueError(f"measured channel {measured['name']!r} must be stored as counts "
@@ -150,7 +153,7 @@ def select_channels(df: pd.DataFrame, meta: dict, settings: dict):
         counts = df[measured["name"]].to_numpy().astype(np.int64)
         return counts, float(measured["step"]), truth, {
             "measured": measured["name"], "truth": truth_ch and truth_ch["name"],
-            "requantized": False}
+            "requantized": False, "truth_step": truth_step}
     req = settings.get("requantize")
     if truth is None or not req:
         raise ValueError("the log has no measured counts channel; give settings['requantize'] "
@@ -162,7 +165,7 @@ def select_channels(df: pd.DataFrame, meta: dict, settings: dict):
     step = float(req["step"])
     counts = quantize(truth, step, float(req.get("offset_frac", 0.5)))
     return counts, step, truth, {"measured": None, "truth": truth_ch["name"],
-                                 "requantized": True}
+                                 "requantized": True, "truth_step": truth_step}
 
 
 def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
@@ -224,6 +227,7 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
     added = [e for e in (reference or {}).get("effects", [])
              if e in lrde_effects.EFFECTS and e not in chosen]
     common = {"f_hz": f_hz, "truth": truth if settings.get("use_truth", True) else None,
+              "truth_step": info.get("truth_step"),
               "rest_position": settings.get("rest_position"), **_sampler_settings(settings)}
     before_kw = {"start": None if comparison is None
                  else comparison["full_fits"]["sinusoid"]["x"], **common}
