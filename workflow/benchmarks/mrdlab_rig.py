@@ -55,6 +55,8 @@ MODELS = {
     "+map+torque+lag": (rig.RigSpec(spacing=0.05, compliance=COMP), None),
     "rig": (rig.RigSpec(spacing=0.05, compliance=COMP, latency="shared", transient=0.004), SPACINGS),
     "rig, per-run latency": (rig.RigSpec(spacing=0.05, compliance=COMP, transient=0.004), SPACINGS),
+    "rig+takeup": (rig.RigSpec(spacing=0.05, compliance=COMP, latency="shared", transient=0.004), SPACINGS,
+                   "takeup"),
 }
 # Done-when targets (steady, all) in rad and the independent study's reference for the full model
 TARGETS = {"frequency": (0.55e-3, 1.20e-3), "load": (0.70e-3, 1.45e-3)}
@@ -76,6 +78,13 @@ def load_runs() -> tuple[list[rig.Run], list[dict]]:
     return runs, group["splits"]
 
 
+def _form(spec: rig.RigSpec) -> str:
+    """The compliance terms, torque scales and transient a fold chose, in words."""
+    terms = "; ".join(f"{c}: {'+'.join(t)}" for c, t in spec.compliance.items())
+    scales = ", ".join(f"{c} T0={v:.3g} N m" for c, v in spec.torque_scales.items())
+    return f"{terms}{'; ' + scales if scales else ''}; transient {spec.transient or 'none'}"
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--models", nargs="+", default=list(MODELS), choices=list(MODELS))
@@ -92,16 +101,18 @@ def main(argv=None) -> int:
     runs, splits = load_runs()
     rows, params = [], []
     for model in args.models:
-        spec, spacings = MODELS[model]
+        spec, spacings, *variants = MODELS[model]
+        variants = variants[0] if variants else None
         start = time.perf_counter()
         if args.loro:
             # Leave-one-run-out folds only, the knot spacing fixed (0.05 rad), every k-th run held
             # out (--loro-max folds): the spread of the shared parameters over many training sets.
             folds = rig.make_folds(runs, [{"name": "runs", "leave_one_run_out": True}])
             folds = folds[::max(len(folds) // args.loro_max, 1)][:args.loro_max]
-            res, out = rig.evaluate(runs, spec, folds, None, keep_residuals=True)
+            res, out = rig.evaluate(runs, spec, folds, None, keep_residuals=True, variants=variants)
         else:
-            res, out = rig.evaluate(runs, spec, rig.make_folds(runs, splits), spacings, keep_residuals=True)
+            res, out = rig.evaluate(runs, spec, rig.make_folds(runs, splits), spacings, keep_residuals=True,
+                                    variants=variants)
         seconds = time.perf_counter() - start
         table = split_table(res)
         for _, r in table.iterrows():
@@ -146,11 +157,14 @@ def main(argv=None) -> int:
                 if name.startswith("transient"):
                     continue
                 params.append({"model": model, "split": f["split"], "fold": str(f["fold"]),
-                               "spacing": f["spacing"], "parameter": name, "value": value,
+                               "spacing": f["spacing"], "form": _form(fit.spec), "parameter": name, "value": value,
                                "ci_lo": ci.get(name, (None, None))[0], "ci_hi": ci.get(name, (None, None))[1],
                                "spread_over_condition_folds": spread.get(name, {}).get("rel_dev"),
                                "spread_over_loro_folds": loro_spread.get(name, {}).get("rel_dev")})
         print(f"{model}: {seconds:.0f} s", file=sys.stderr)
+        for f in out:
+            print(f"  fold {f['fold']}: spacing {f['spacing']}, {_form(f['fit'].spec)}; variant scores "
+                  f"{f.get('variant_scores')}", file=sys.stderr)
         print(table.to_string(), file=sys.stderr)
         print({k: round(v["rel_dev"], 3) for k, v in spread.items() if not k.startswith("transient")}, file=sys.stderr)
     args.out.mkdir(parents=True, exist_ok=True)
