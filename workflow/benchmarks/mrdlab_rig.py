@@ -9,9 +9,14 @@ scored on held-out runs:
 - ``+map``: and the calibration map of the measured-side angle (knots every 0.05 rad);
 - ``+map+torque+lag``: and the compliance (``T`` and ``T|T|`` of the back torque, ``T`` of the
   front torque) and a per-run latency;
-- ``rig`` (the rig rule's model): the compliance, one latency for the rig, the reversal transient
+- ``rig``: the compliance, one latency for the rig, the reversal transient
   (knots every 4 mrad of motor travel), and the map's knot spacing chosen per fold on the
-  training runs (leave-one-run-out); ``rig, per-run latency`` the same with a latency per run.
+  training runs; ``rig, per-run latency`` the same with a latency per run;
+- ``rig+takeup`` (the rig rule's model): the ``rig`` model with its form chosen per fold on the
+  training runs: the back torque's ``T|T|`` kept or replaced by the play take-up ``tanh(T/T0)``
+  (``T0`` = 0.1, 0.2, 0.4 or 0.8 times the torque's std), the reversal transient kept or left
+  out; chosen on the steady strokes of one training condition value held out at a time, then the
+  knot spacing the same way.
 
 Splits: frequency (train 0.1/0.3/0.5 Hz, test 0.2/0.4 Hz) and load (train 10/20 %, test 30/40 %);
 ``--loro`` runs leave-one-run-out folds instead (knot spacing fixed at 0.05 rad, ``--loro-max``
