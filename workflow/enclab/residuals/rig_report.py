@@ -156,7 +156,7 @@ def term_label(name: str, spec: rg.RigSpec) -> str:
     """``T``, ``T|T|`` or ``tanh(T/T0)`` of a compliance coefficient's name."""
     channel, _, term = name.partition(":")
     if term == "saturating":
-        return f"tanh(T/{spec.torque_scales[channel]:.3g})"
+        return f"tanh(T/{spec.torque_scales[channel]:.3g} N m)"
     return "T|T|" if term == "signed_square" else "T"
 
 
