@@ -398,3 +398,62 @@ def test_rig_report_shows_the_chosen_takeup(takeup_rig):
     assert "tanh(T/" in ax.get_title()
     # the fit on all runs, its curve, and the fold's curve
     assert len(ax.lines) == 3
+
+
+# ----------------------------------------------------------------------------- input-side map
+
+
+def input_error(phi):
+    """Error of the truth reading (rad, output side) periodic in the input angle."""
+    return 3e-4 * np.sin(phi + 0.4) + 1.5e-4 * np.cos(2 * phi)
+
+
+def test_input_columns_are_the_harmonics():
+    phi = np.linspace(0, 2 * np.pi, 7)
+    D = rig.input_columns(phi, 2)
+    assert np.allclose(D, np.column_stack([np.cos(phi), np.cos(2 * phi), np.sin(phi), np.sin(2 * phi)]),
+                       rtol=0, atol=1e-15)
+
+
+def test_input_side_map_recovered():
+    # A 35:1 gear, the truth read through it with an error periodic per input turn; the
+    # measured side carries a slow output-side map and a scale as well. Knots every 0.2 rad of
+    # the output angle cannot follow a period of 2 pi / 35 = 0.18 rad, the harmonics can (finer
+    # knots trade with them: both are functions of nearly the same angle).
+    runs = rig.simulate_rig(np.random.default_rng(3), CONDS, step=STEP, truth_step=TRUTH_STEP,
+                            scale=0.02, map_fn=lambda y: 0.002 * np.cos(2 * np.pi * y / 0.6),
+                            play_width=0.02, gear_ratio=35.0, input_map_fn=input_error)
+    spec = rig.RigSpec(spacing=0.2, gear_ratio=35.0, input_harmonics=2)
+    fit = rig.fit_rig(runs, spec)
+    phi = np.linspace(0, 2 * np.pi, 200)
+    curve, lo, hi = fit.input_curve(phi)
+    # The reading minus the truth carries minus the truth's error while the play is engaged;
+    # inside the play it holds the value of the last engaged instant, which harmonics of the
+    # truth's own angle do not follow (a bias of a few per cent on these 2-5 s runs).
+    target = -input_error(phi)
+    assert np.max(np.abs(curve - target)) < 0.1 * np.max(np.abs(target))
+    assert np.all(hi >= lo) and np.max(hi - lo) < 0.1 * np.max(np.abs(target))
+    assert all(not n.startswith("input") for n in fit.shared())
+    # without the harmonics the held-out residual keeps the error
+    folds = rig.make_folds(runs, [{"name": "f", "by": "frequency_hz", "train": [0.5, 1.0], "test": [0.75]}])
+    with_map, _ = rig.evaluate(runs, spec, folds)
+    without, _ = rig.evaluate(runs, spec.with_(input_harmonics=0), folds)
+    assert rig.pooled(with_map)["steady_std"] < 0.9 * rig.pooled(without)["steady_std"]
+    with pytest.raises(ValueError, match="gear ratio"):
+        rig.fit_rig(runs[:2], rig.RigSpec(input_harmonics=1))
+
+
+def test_rig_report_shows_the_input_side_map():
+    from enclab.residuals import rig_report
+
+    runs = rig.simulate_rig(np.random.default_rng(4), CONDS[:4], step=STEP, truth_step=TRUTH_STEP,
+                            play_width=0.02, gear_ratio=35.0, input_map_fn=input_error)
+    spec = rig.RigSpec(spacing=0.2, gear_ratio=35.0, input_harmonics=2)
+    out = rig_report.report_rig("sim", "theta_out", runs, spec,
+                                [{"name": "f", "by": "frequency_hz", "train": [0.5], "test": [0.75]}], None)
+    block = out["block"]["final"]["input_map"]
+    assert len(block["curve"]) == 101 and block["gear_ratio"] == 35.0
+    # the curve over one revolution is the one the fit gives, within its band
+    assert all(lo <= c <= hi for c, lo, hi in zip(block["curve"], block["band_lo"], block["band_hi"]))
+    assert len(out["figures"]["map"].axes) == 2
+    assert "input-side map (2 harmonics" in out["markdown"]

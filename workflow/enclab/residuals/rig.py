@@ -48,7 +48,7 @@ from enclab.residuals.calibration import MapBasis, compliance_columns, complianc
 from enclab.residuals.effects import motion_sign, play_operator
 
 __all__ = ["Run", "RigSpec", "RigFit", "steady_mask", "fit_rig", "predict_run", "score_run",
-           "choose_spacing", "choose_variant", "choose_model", "takeup_variants", "heldout_rms",
+           "choose_spacing", "choose_variant", "input_columns", "choose_model", "takeup_variants", "heldout_rms",
            "inner_groups", "make_folds", "evaluate", "pooled", "fold_spread", "floor_std", "map_range",
            "run_from_canonical"]
 
@@ -107,6 +107,13 @@ class RigSpec:
         truth's travel since the last reversal, odd in the direction of motion, vanishing from
         ``travel`` on (the mean motion of the measured side inside the play that a play
         operator cannot follow); ``None`` = none.
+    gear_ratio : float or None
+        Input angle per truth angle (e.g. 35 for a 35:1 gear whose input encoder, read on the
+        output side, is the truth): the input-side map's angle is ``gear_ratio * truth``.
+    input_harmonics : int
+        Harmonics per input-side revolution of the input-side calibration map (0 = none): a
+        repeatable error of the input encoder or the gear mesh, periodic in the input angle
+        (a spline of the output angle cannot hold it once a stroke spans many input turns).
     travel, t_skip : float
         Steady strokes: more than ``travel`` rad since the last reversal; every score leaves
         out the first ``t_skip`` s (and the fit does too).
@@ -123,6 +130,8 @@ class RigSpec:
     torque_scales: Mapping = field(default_factory=dict)
     max_play: float = 0.08
     transient: float | None = None
+    gear_ratio: float | None = None
+    input_harmonics: int = 0
     travel: float = 0.06
     t_skip: float = 1.5
     n_iter: int = 20
@@ -133,7 +142,7 @@ class RigSpec:
         return RigSpec(**d)
 
 
-_CURVES = ("map", "transient")
+_CURVES = ("map", "transient", "input")
 
 
 @dataclass
@@ -167,6 +176,22 @@ class RigFit:
         sd = np.sqrt(np.diag(self.cov))
         return {n: (float(c - z * s), float(c + z * s)) for n, c, s in zip(self.names, self.coef, sd)
                 if not n.startswith(_CURVES)}
+
+    def input_curve(self, phi, z: float = 1.6449):
+        """The input-side calibration map at input angles ``phi`` (rad): ``(curve, lo, hi)``,
+        what it adds to the reading (rad, measured side), with a 90 % jackknife band; zeros
+        without one."""
+        phi = np.asarray(phi, dtype=np.float64)
+        idx = [i for i, n in enumerate(self.names) if n.startswith("input")]
+        if not idx:
+            zero = np.zeros_like(phi)
+            return zero, zero, zero
+        D = input_columns(phi, self.spec.input_harmonics)
+        curve = D @ self.coef[idx]
+        if self.cov is None:
+            return curve, curve, curve
+        sd = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", D, self.cov[np.ix_(idx, idx)], D), 0.0))
+        return curve, curve - z * sd, curve + z * sd
 
     def map_curve(self, a, z: float = 1.6449):
         """The calibration map at ``a``: ``(curve, lo, hi)`` with a 90 % jackknife band (the
@@ -234,6 +259,14 @@ def reversal_travel(truth, hysteresis: float = 2e-4) -> tuple[np.ndarray, np.nda
     return travel, d
 
 
+def input_columns(phi, harmonics: int) -> np.ndarray:
+    """``cos(k phi), sin(k phi)`` for ``k = 1..harmonics`` of the input angle ``phi`` (rad):
+    the columns of the input-side calibration map (no constant: that is the offset)."""
+    phi = np.asarray(phi, dtype=np.float64)
+    k = np.arange(1, int(harmonics) + 1)
+    return np.hstack([np.cos(np.outer(phi, k)), np.sin(np.outer(phi, k))])
+
+
 def transient_columns(truth, spacing: float, travel: float) -> np.ndarray:
     """Columns of the reversal transient: cubic B-splines in the travel since the last
     reversal on ``[0, travel]`` (knots every ``spacing``), times the direction; the two that do
@@ -266,6 +299,12 @@ def _shared_columns(run: Run, spec: RigSpec, basis: MapBasis | None, a_mid: floa
     if spec.compliance:
         names += compliance_names(spec.compliance)
         cols.append(compliance_columns(spec.compliance, run.torques, spec.torque_scales))
+    if spec.input_harmonics:
+        if not spec.gear_ratio:
+            raise ValueError(f"run {run.run_id!r}: an input-side map needs a gear ratio")
+        k = range(1, spec.input_harmonics + 1)
+        names += [f"input_cos{j}" for j in k] + [f"input_sin{j}" for j in k]
+        cols.append(input_columns(spec.gear_ratio * run.truth, spec.input_harmonics))
     if spec.transient:
         T = transient_columns(run.truth, spec.transient, spec.travel)
         names += [f"transient{j}" for j in range(T.shape[1])]
@@ -724,7 +763,8 @@ def simulate_rig(rng: np.random.Generator, conditions: Sequence[Mapping], *, dur
                  fs: float = 1000.0, amplitude: float = 0.5, step: float = 2 * np.pi / 8192,
                  truth_step: float = 2 * np.pi / 146860, scale: float = 0.0, map_fn=None,
                  compliance: Mapping | None = None, play_width=0.02, latency=0.0,
-                 torque_gain: float = 0.1, torque_scales: Mapping | None = None) -> list[Run]:
+                 torque_gain: float = 0.1, torque_scales: Mapping | None = None,
+                 gear_ratio: float | None = None, input_map_fn=None) -> list[Run]:
     """Runs of a simulated rig with known shared and per-run effects.
 
     Each condition ``{"frequency_hz": f, "load": L, ...}`` gives one run: the truth is a sine of
@@ -737,6 +777,8 @@ def simulate_rig(rng: np.random.Generator, conditions: Sequence[Mapping], *, dur
     ``play_width`` and ``latency`` are numbers or sequences (one per run). ``compliance`` is
     ``{"torque_back:linear": k1, "torque_back:signed_square": k2, "torque_front:linear": k3}``
     (``"torque_back:saturating": k`` with ``torque_scales={"torque_back": T0}``: ``k tanh(T / T0)``).
+    ``input_map_fn(phi)`` (rad, truth side) is an error of the truth reading periodic in the
+    input angle ``phi = gear_ratio * theta``: the truth reads ``theta + input_map_fn(phi)``.
     """
     runs = []
     n = int(round(duration * fs))
@@ -765,7 +807,10 @@ def simulate_rig(rng: np.random.Generator, conditions: Sequence[Mapping], *, dur
             y = y + k * compliance_columns({channel: [term]}, torques, torque_scales)[:, 0]
         reading = y + scale * (y - amplitude) + (map_fn(y) if map_fn is not None else 0.0)
         measured = step * np.round(reading / step)
-        truth = truth_step * np.round(theta(t) / truth_step) if truth_step else theta(t)
+        th = theta(t)
+        if input_map_fn is not None:
+            th = th + input_map_fn(gear_ratio * th)
+        truth = truth_step * np.round(th / truth_step) if truth_step else th
         runs.append(Run(run_id=f"run{i:02d}", t=t, truth=truth, measured=measured, step=step,
                         truth_step=truth_step, torques=torques, conditions=dict(cond)))
     return runs

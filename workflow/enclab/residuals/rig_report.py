@@ -127,10 +127,22 @@ def _grid(fit: rg.RigFit, n: int = 400) -> np.ndarray:
 
 def map_figure(result: Mapping, title: str = "") -> Figure:
     """The calibration map of the fit on all runs with its 90 % band, the scale's line over
-    the reference range, and each fold's map (thin)."""
+    the reference range, and each fold's map (thin); with an input-side map, a second panel of
+    it over one input revolution."""
     fit = result["final"]
     fig = Figure(figsize=(7.5, 4.2), layout="constrained")
-    ax = fig.add_subplot()
+    if fit.spec.input_harmonics:
+        ax, ax_in = fig.subplots(1, 2, width_ratios=[2, 1])
+        phi = np.linspace(0, 2 * np.pi, 200)
+        c, lo_in, hi_in = fit.input_curve(phi)
+        ax_in.fill_between(phi, lo_in * MRAD, hi_in * MRAD, color="C2", alpha=0.3, lw=0, label="90 % band")
+        ax_in.plot(phi, c * MRAD, color="C2", lw=1.5, label=f"{fit.spec.input_harmonics} harmonics")
+        ax_in.set_xlabel("input-side angle (rad, one revolution)")
+        ax_in.set_ylabel("input-side map (mrad, measured side)")
+        ax_in.set_title(f"input side, gear ratio {fit.spec.gear_ratio:g}", fontsize=9)
+        ax_in.legend(fontsize=7)
+    else:
+        ax = fig.add_subplot()
     if fit.basis is None:
         ax.text(0.5, 0.5, "no calibration map in this model", ha="center", transform=ax.transAxes)
         return fig
@@ -273,7 +285,9 @@ def markdown(name: str, channel: str, result: Mapping, conditions: Sequence[str]
                           + (["compliance " + ", ".join(f"{n.split(':')[0]} {term_label(n, fit.spec)}"
                                                          for n in compliance_names(fit.spec.compliance))]
                              if fit.spec.compliance else [])
-                          + ([f"reversal transient (knots every {fit.spec.transient:g} rad)"] if fit.spec.transient else []))
+                          + ([f"reversal transient (knots every {fit.spec.transient:g} rad)"] if fit.spec.transient else [])
+                          + ([f"input-side map ({fit.spec.input_harmonics} harmonics per input revolution, gear "
+                              f"ratio {fit.spec.gear_ratio:g})"] if fit.spec.input_harmonics else []))
               + ".", ""]
     forms = [f for f in result["folds"] if f.get("variant_scores")]
     if forms:
@@ -367,6 +381,12 @@ def _fit_block(fit: rg.RigFit) -> dict:
         curve, lo, hi = fit.map_curve(a)
         block["map"] = {"angle": a.tolist(), "curve": curve.tolist(), "band_lo": lo.tolist(),
                         "band_hi": hi.tolist(), "scale_reference_range": list(fit.basis.ref)}
+    if fit.spec.input_harmonics:
+        phi = np.linspace(0, 2 * np.pi, 101)
+        curve, lo, hi = fit.input_curve(phi)
+        block["input_map"] = {"input_angle": phi.tolist(), "curve": curve.tolist(), "band_lo": lo.tolist(),
+                              "band_hi": hi.tolist(), "gear_ratio": fit.spec.gear_ratio,
+                              "harmonics": fit.spec.input_harmonics}
     return block
 
 
