@@ -286,8 +286,8 @@ def markdown(name: str, channel: str, result: Mapping, conditions: Sequence[str]
                                                          for n in compliance_names(fit.spec.compliance))]
                              if fit.spec.compliance else [])
                           + ([f"reversal transient (knots every {fit.spec.transient:g} rad)"] if fit.spec.transient else [])
-                          + ([f"input-side map ({fit.spec.input_harmonics} harmonics per input revolution, gear "
-                              f"ratio {fit.spec.gear_ratio:g})"] if fit.spec.input_harmonics else []))
+                          + ([(f"input-side map ({fit.spec.input_harmonics} harmonics per input revolution, "
+                               f"gear ratio {fit.spec.gear_ratio:g})")] if fit.spec.input_harmonics else []))
               + ".", ""]
     forms = [f for f in result["folds"] if f.get("variant_scores")]
     if forms:
