@@ -35,6 +35,13 @@ last reversal) and ``all`` (every sample after ``t_skip``). The residual is the 
 
 Splits (:func:`make_folds`): by a condition (train on some values, test on others; or leave one
 value out) and leave-one-run-out.
+
+Choices made on held-out data (:func:`choose_model`), on each fold's training runs alone with
+groups of them held out in turn (:func:`inner_groups`: by the fold's condition): the knot
+spacing, and the model form (:func:`takeup_variants`: the declared compliance or the play
+take-up ``tanh(T / T0)`` in place of ``T|T|``, with or without the reversal transient). An
+input-side calibration map (harmonics of ``gear_ratio * truth``) is available when a gear ratio
+is declared (``RigSpec(gear_ratio=..., input_harmonics=...)``).
 """
 from __future__ import annotations
 
