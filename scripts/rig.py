@@ -17,8 +17,10 @@ def main(smk):
     spec = rig.RigSpec(spacing=max(s["spacings"]), compliance=dict(p.compliance), max_play=s["max_play"],
                        travel=s["travel"], t_skip=s["t_skip"], transient=s.get("transient"),
                        latency=True if s.get("latency") == "run" else "shared")
+    # The compliance's form (declared, or the play take-up) and the reversal transient are chosen
+    # per fold on its training runs, like the knot spacing.
     out = report_rig(smk.wildcards.rig, p.pair["measured"], runs, spec, list(p.splits), s["spacings"],
-                     p.truth_counts_per_rev)
+                     p.truth_counts_per_rev, variants="takeup")
     atomic.write_json(out["block"], smk.output.block)
     for key in ("heldout", "splits", "conditions"):
         atomic.write_table(out["tables"][key], smk.output[key])

@@ -300,3 +300,160 @@ def test_remains_separates_repeatable_from_random_motion_in_the_play(sim_rig):
     assert remains(sim_rig[:4], same, spec)["repeatable_share"] > 0.95
     assert remains(sim_rig[:4], random, spec)["repeatable_share"] < 0.1
     assert remains(sim_rig[:4], same, spec)["window_share"] > 0.99
+
+
+# ----------------------------------------------------------------------------- play take-up
+
+TAKEUP = {"torque_back:linear": 0.02, "torque_back:saturating": 0.004, "torque_front:linear": -0.2}
+
+
+@pytest.fixture(scope="module")
+def takeup_rig():
+    """Runs whose twist takes the play up over 0.01 N m of back torque: ``0.004 tanh(T/0.01)``."""
+    return rig.simulate_rig(np.random.default_rng(7), CONDS, step=STEP, truth_step=TRUTH_STEP,
+                            compliance=TAKEUP, torque_scales={"torque_back": 0.01},
+                            play_width=[0.02, 0.025, 0.03], latency=0.001)
+
+
+def test_saturating_term_is_tanh_and_needs_a_scale():
+    T = np.linspace(-0.1, 0.1, 11)
+    cols = cal.compliance_columns({"tb": ["linear", "saturating"]}, {"tb": T}, {"tb": 0.02})
+    assert np.allclose(cols[:, 1], np.tanh(T / 0.02), rtol=0, atol=1e-15)
+    assert np.allclose(cal.compliance_curve([0.1, 0.003], {"tb": ["linear", "saturating"]}, "tb", T, {"tb": 0.02}),
+                       0.1 * T + 0.003 * np.tanh(T / 0.02), rtol=0, atol=1e-15)
+    with pytest.raises(ValueError, match="torque scale"):
+        cal.compliance_columns({"tb": ["saturating"]}, {"tb": T})
+    with pytest.raises(ValueError, match="saturating"):
+        cal.compliance_names({"tb": ["cubic"]})
+
+
+def test_heldout_rms_matches_refitting_without_each_group(sim_rig):
+    # Brute force: fit the shared terms on the other groups, predict the left-out runs with
+    # their own offset refitted; the pooled rms is what heldout_rms gets from one set of
+    # normal equations.
+    runs = sim_rig[:6]
+    spec = rig.RigSpec(play=False, latency=False, spacing=None, compliance=SPEC_COMP)
+    groups = rig.inner_groups(runs, "load")
+    assert len(set(groups.values())) == 3
+    ss, n = 0.0, 0
+    for key in set(groups.values()):
+        fit = rig.fit_rig([r for r in runs if groups[r.run_id] != key], spec)
+        for r in (r for r in runs if groups[r.run_id] == key):
+            pred, _ = rig.predict_run(fit, r)
+            e = (r.measured - pred)[r.t >= r.t[0] + spec.t_skip]
+            ss += float(np.sum((e - e.mean()) ** 2))
+            n += e.size
+    zero = {r.run_id: 0.0 for r in runs}
+    assert rig.heldout_rms(runs, spec, zero, groups) == pytest.approx(np.sqrt(ss / n), rel=1e-9)
+    # one group per run when a condition has a single value
+    assert rig.inner_groups(runs[:3], "frequency_hz") == {r.run_id: r.run_id for r in runs[:3]}
+    with pytest.raises(ValueError, match="2 groups"):
+        rig.heldout_rms(runs[:1], spec, zero)
+
+
+def test_play_takeup_chosen_on_training_runs_and_extrapolates_in_load(takeup_rig):
+    # Declared softening T + T|T|; trained on the two low loads, tested on the high one. The
+    # choice sees only the training runs (one load held out at a time).
+    spec = rig.RigSpec(spacing=None, compliance=SPEC_COMP)
+    folds = rig.make_folds(takeup_rig, [{"name": "load", "by": "load", "train": [0.0, 0.3], "test": [0.6]}])
+    poly, _ = rig.evaluate(takeup_rig, spec, folds)
+    rows, out = rig.evaluate(takeup_rig, spec, folds, variants="takeup")
+    fit = out[0]["fit"]
+    assert fit.spec.compliance["torque_back"] == ["linear", "saturating"]
+    assert 0.5 < fit.spec.torque_scales["torque_back"] / 0.01 < 2.0
+    assert fit.shared()["torque_back:T0"] == fit.spec.torque_scales["torque_back"]
+    floor = rig.floor_std(STEP, TRUTH_STEP)
+    after, before = rig.pooled(rows)["steady_std"], rig.pooled(poly)["steady_std"]
+    assert after < 1.5 * floor < before / 4
+    # the front torque's linear compliance is untouched by the choice and recovered
+    assert fit.shared()["torque_front:linear"] == pytest.approx(-0.2, rel=0.05)
+
+
+def test_takeup_variants_scale_with_the_torque_and_keep_the_declared_form_first(takeup_rig):
+    spec = rig.RigSpec(compliance=SPEC_COMP, transient=0.004)
+    forms = rig.takeup_variants(takeup_rig, spec, relative=(0.5,))
+    sd = np.std(np.concatenate([r.torques["torque_back"] for r in takeup_rig]))
+    assert forms[0] == {} and forms[2] == {"transient": None}
+    assert forms[1]["torque_scales"] == {"torque_back": pytest.approx(0.5 * sd)}
+    assert forms[1]["compliance"]["torque_front"] == ["linear"]
+    assert len(forms) == 4
+    # nothing to replace: only the transient is a choice
+    assert rig.takeup_variants(takeup_rig, rig.RigSpec(compliance={"torque_back": ["linear"]})) == [{}]
+
+
+def test_rig_report_shows_the_chosen_takeup(takeup_rig):
+    from enclab.residuals import rig_report
+
+    runs = [takeup_rig[i] for i in (0, 1, 2, 4, 5)]
+    spec = rig.RigSpec(spacing=None, compliance=SPEC_COMP)
+    out = rig_report.report_rig("sim", "theta_out", runs, spec,
+                                [{"name": "load", "by": "load", "train": [0.0, 0.3], "test": [0.6]}],
+                                None, variants="takeup")
+    fold = out["block"]["folds"][0]
+    assert fold["compliance"]["torque_back"] == ["linear", "saturating"]
+    assert len(fold["variant_scores"]) == 5 and "torque_back:T0" in fold["shared"]
+    text = out["markdown"]
+    assert "Model form per fold" in text and "tanh(T/" in text
+    ax = out["figures"]["compliance"].axes[0]
+    assert "tanh(T/" in ax.get_title()
+    # the fit on all runs, its curve, and the fold's curve
+    assert len(ax.lines) == 3
+
+
+# ----------------------------------------------------------------------------- input-side map
+
+
+def input_error(phi):
+    """Error of the truth reading (rad, output side) periodic in the input angle."""
+    return 3e-4 * np.sin(phi + 0.4) + 1.5e-4 * np.cos(2 * phi)
+
+
+def test_input_columns_are_the_harmonics():
+    phi = np.linspace(0, 2 * np.pi, 7)
+    D = rig.input_columns(phi, 2)
+    assert np.allclose(D, np.column_stack([np.cos(phi), np.cos(2 * phi), np.sin(phi), np.sin(2 * phi)]),
+                       rtol=0, atol=1e-15)
+
+
+def test_input_side_map_recovered():
+    # A 35:1 gear, the truth read through it with an error periodic per input turn; the
+    # measured side carries a slow output-side map and a scale as well. Knots every 0.2 rad of
+    # the output angle cannot follow a period of 2 pi / 35 = 0.18 rad, the harmonics can (finer
+    # knots trade with them: both are functions of nearly the same angle).
+    runs = rig.simulate_rig(np.random.default_rng(3), CONDS, step=STEP, truth_step=TRUTH_STEP,
+                            scale=0.02, map_fn=lambda y: 0.002 * np.cos(2 * np.pi * y / 0.6),
+                            play_width=0.02, gear_ratio=35.0, input_map_fn=input_error)
+    spec = rig.RigSpec(spacing=0.2, gear_ratio=35.0, input_harmonics=2)
+    fit = rig.fit_rig(runs, spec)
+    phi = np.linspace(0, 2 * np.pi, 200)
+    curve, lo, hi = fit.input_curve(phi)
+    # The reading minus the truth carries minus the truth's error while the play is engaged;
+    # inside the play it holds the value of the last engaged instant, which harmonics of the
+    # truth's own angle do not follow (a bias of a few per cent on these 2-5 s runs).
+    target = -input_error(phi)
+    assert np.max(np.abs(curve - target)) < 0.1 * np.max(np.abs(target))
+    assert np.all(hi >= lo) and np.max(hi - lo) < 0.1 * np.max(np.abs(target))
+    assert all(not n.startswith("input") for n in fit.shared())
+    # without the harmonics the held-out residual keeps the error
+    folds = rig.make_folds(runs, [{"name": "f", "by": "frequency_hz", "train": [0.5, 1.0], "test": [0.75]}])
+    with_map, _ = rig.evaluate(runs, spec, folds)
+    without, _ = rig.evaluate(runs, spec.with_(input_harmonics=0), folds)
+    assert rig.pooled(with_map)["steady_std"] < 0.9 * rig.pooled(without)["steady_std"]
+    with pytest.raises(ValueError, match="gear ratio"):
+        rig.fit_rig(runs[:2], rig.RigSpec(input_harmonics=1))
+
+
+def test_rig_report_shows_the_input_side_map():
+    from enclab.residuals import rig_report
+
+    runs = rig.simulate_rig(np.random.default_rng(4), CONDS[:4], step=STEP, truth_step=TRUTH_STEP,
+                            play_width=0.02, gear_ratio=35.0, input_map_fn=input_error)
+    spec = rig.RigSpec(spacing=0.2, gear_ratio=35.0, input_harmonics=2)
+    out = rig_report.report_rig("sim", "theta_out", runs, spec,
+                                [{"name": "f", "by": "frequency_hz", "train": [0.5], "test": [0.75]}], None)
+    block = out["block"]["final"]["input_map"]
+    assert len(block["curve"]) == 101 and block["gear_ratio"] == 35.0
+    # the curve over one revolution is the one the fit gives, within its band
+    assert all(lo <= c <= hi for c, lo, hi in zip(block["curve"], block["band_lo"], block["band_hi"]))
+    assert len(out["figures"]["map"].axes) == 2
+    assert "input-side map (2 harmonics" in out["markdown"]

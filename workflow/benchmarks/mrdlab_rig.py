@@ -9,9 +9,14 @@ scored on held-out runs:
 - ``+map``: and the calibration map of the measured-side angle (knots every 0.05 rad);
 - ``+map+torque+lag``: and the compliance (``T`` and ``T|T|`` of the back torque, ``T`` of the
   front torque) and a per-run latency;
-- ``rig`` (the rig rule's model): the compliance, one latency for the rig, the reversal transient
+- ``rig``: the compliance, one latency for the rig, the reversal transient
   (knots every 4 mrad of motor travel), and the map's knot spacing chosen per fold on the
-  training runs (leave-one-run-out); ``rig, per-run latency`` the same with a latency per run.
+  training runs; ``rig, per-run latency`` the same with a latency per run;
+- ``rig+takeup`` (the rig rule's model): the ``rig`` model with its form chosen per fold on the
+  training runs: the back torque's ``T|T|`` kept or replaced by the play take-up ``tanh(T/T0)``
+  (``T0`` = 0.1, 0.2, 0.4 or 0.8 times the torque's std), the reversal transient kept or left
+  out; chosen on the steady strokes of one training condition value held out at a time, then the
+  knot spacing the same way.
 
 Splits: frequency (train 0.1/0.3/0.5 Hz, test 0.2/0.4 Hz) and load (train 10/20 %, test 30/40 %);
 ``--loro`` runs leave-one-run-out folds instead (knot spacing fixed at 0.05 rad, ``--loro-max``
@@ -55,6 +60,8 @@ MODELS = {
     "+map+torque+lag": (rig.RigSpec(spacing=0.05, compliance=COMP), None),
     "rig": (rig.RigSpec(spacing=0.05, compliance=COMP, latency="shared", transient=0.004), SPACINGS),
     "rig, per-run latency": (rig.RigSpec(spacing=0.05, compliance=COMP, transient=0.004), SPACINGS),
+    "rig+takeup": (rig.RigSpec(spacing=0.05, compliance=COMP, latency="shared", transient=0.004), SPACINGS,
+                   "takeup"),
 }
 # Done-when targets (steady, all) in rad and the independent study's reference for the full model
 TARGETS = {"frequency": (0.55e-3, 1.20e-3), "load": (0.70e-3, 1.45e-3)}
@@ -76,6 +83,13 @@ def load_runs() -> tuple[list[rig.Run], list[dict]]:
     return runs, group["splits"]
 
 
+def _form(spec: rig.RigSpec) -> str:
+    """The compliance terms, torque scales and transient a fold chose, in words."""
+    terms = "; ".join(f"{c}: {'+'.join(t)}" for c, t in spec.compliance.items())
+    scales = ", ".join(f"{c} T0={v:.3g} N m" for c, v in spec.torque_scales.items())
+    return f"{terms}{'; ' + scales if scales else ''}; transient {spec.transient or 'none'}"
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--models", nargs="+", default=list(MODELS), choices=list(MODELS))
@@ -92,16 +106,18 @@ def main(argv=None) -> int:
     runs, splits = load_runs()
     rows, params = [], []
     for model in args.models:
-        spec, spacings = MODELS[model]
+        spec, spacings, *variants = MODELS[model]
+        variants = variants[0] if variants else None
         start = time.perf_counter()
         if args.loro:
             # Leave-one-run-out folds only, the knot spacing fixed (0.05 rad), every k-th run held
             # out (--loro-max folds): the spread of the shared parameters over many training sets.
             folds = rig.make_folds(runs, [{"name": "runs", "leave_one_run_out": True}])
             folds = folds[::max(len(folds) // args.loro_max, 1)][:args.loro_max]
-            res, out = rig.evaluate(runs, spec, folds, None, keep_residuals=True)
+            res, out = rig.evaluate(runs, spec, folds, None, keep_residuals=True, variants=variants)
         else:
-            res, out = rig.evaluate(runs, spec, rig.make_folds(runs, splits), spacings, keep_residuals=True)
+            res, out = rig.evaluate(runs, spec, rig.make_folds(runs, splits), spacings, keep_residuals=True,
+                                    variants=variants)
         seconds = time.perf_counter() - start
         table = split_table(res)
         for _, r in table.iterrows():
@@ -146,11 +162,14 @@ def main(argv=None) -> int:
                 if name.startswith("transient"):
                     continue
                 params.append({"model": model, "split": f["split"], "fold": str(f["fold"]),
-                               "spacing": f["spacing"], "parameter": name, "value": value,
+                               "spacing": f["spacing"], "form": _form(fit.spec), "parameter": name, "value": value,
                                "ci_lo": ci.get(name, (None, None))[0], "ci_hi": ci.get(name, (None, None))[1],
                                "spread_over_condition_folds": spread.get(name, {}).get("rel_dev"),
                                "spread_over_loro_folds": loro_spread.get(name, {}).get("rel_dev")})
         print(f"{model}: {seconds:.0f} s", file=sys.stderr)
+        for f in out:
+            print(f"  fold {f['fold']}: spacing {f['spacing']}, {_form(f['fit'].spec)}; variant scores "
+                  f"{f.get('variant_scores')}", file=sys.stderr)
         print(table.to_string(), file=sys.stderr)
         print({k: round(v["rel_dev"], 3) for k, v in spread.items() if not k.startswith("transient")}, file=sys.stderr)
     args.out.mkdir(parents=True, exist_ok=True)

@@ -18,6 +18,16 @@ softens or stiffens with load: play taken up gradually shows as ``k2`` of sign o
 ``k1``), and a linear term per further torque channel. *Signature*: a residual that follows the
 torque, the same at every angle.
 
+**Play take-up** (term ``saturating``): ``k tanh(T / T0)``, a twist that grows fast at small
+torque and stops growing once the play is taken up (``T0``: the torque over which that happens,
+a setting chosen on held-out runs). A play operator puts the output on the side of its last
+motion; when the torque that loads the gear is near zero during a stroke (a load that nearly
+balances the friction), the gear floats inside its play instead. A polynomial ``k1 T + k2 T|T|``
+bends the wrong way outside the torques it was fitted on; ``tanh`` is bounded, so a fit on low
+loads extrapolates to high loads as a constant. *Signature*: a residual inside the steady strokes
+of magnitude up to half the play, where the torque is small, largest at the load that balances
+the friction.
+
 Every function is pure: arrays in, arrays out.
 """
 from __future__ import annotations
@@ -28,12 +38,16 @@ from functools import cached_property
 import numpy as np
 from scipy.interpolate import BSpline
 
-__all__ = ["MapBasis", "TERMS", "compliance_columns", "compliance_names", "compliance_curve"]
+__all__ = ["MapBasis", "TERMS", "SCALED_TERMS", "compliance_columns", "compliance_names", "compliance_curve"]
 
 #: Torque terms of the compliance: name -> function of the torque (N m) giving a column.
 TERMS = {
     "linear": lambda T: T,
     "signed_square": lambda T: T * np.abs(T),
+}
+#: Terms with a torque scale ``T0`` (N m): name -> function of ``(T, T0)``.
+SCALED_TERMS = {
+    "saturating": lambda T, T0: np.tanh(T / T0),
 }
 
 
@@ -122,27 +136,39 @@ def compliance_names(spec) -> list[str]:
     out = []
     for channel, terms in spec.items():
         for term in terms:
-            if term not in TERMS:
-                raise ValueError(f"compliance term {term!r} of channel {channel!r}: expected one of {sorted(TERMS)}")
+            if term not in TERMS and term not in SCALED_TERMS:
+                raise ValueError(f"compliance term {term!r} of channel {channel!r}: expected one of "
+                                 f"{sorted(TERMS) + sorted(SCALED_TERMS)}")
             out.append(f"{channel}:{term}")
     return out
 
 
-def compliance_columns(spec, torques) -> np.ndarray:
+def _term(channel, term, T, scales):
+    if term in SCALED_TERMS:
+        T0 = (scales or {}).get(channel)
+        if T0 is None or not (np.isfinite(T0) and T0 > 0):
+            raise ValueError(f"compliance term {term!r} of channel {channel!r} needs a positive torque "
+                             f"scale, got {T0!r}")
+        return SCALED_TERMS[term](T, float(T0))
+    return TERMS[term](T)
+
+
+def compliance_columns(spec, torques, scales=None) -> np.ndarray:
     """Columns of the compliance for a term spec ``{channel: [term, ...]}`` and the logged
-    torques ``{channel: array (N m)}``: shape ``(N, n_terms)``."""
+    torques ``{channel: array (N m)}``: shape ``(N, n_terms)``. ``scales``: ``{channel: T0}``
+    (N m) of the terms that have one (``saturating``)."""
     cols = []
     for name in compliance_names(spec):
         channel, term = name.split(":")
         if channel not in torques:
             raise ValueError(f"compliance needs torque channel {channel!r}; have {sorted(torques)}")
-        cols.append(TERMS[term](np.asarray(torques[channel], dtype=np.float64)))
+        cols.append(_term(channel, term, np.asarray(torques[channel], dtype=np.float64), scales))
     if not cols:
         return np.zeros((0, 0))
     return np.column_stack(cols)
 
 
-def compliance_curve(coef, spec, channel, torque) -> np.ndarray:
+def compliance_curve(coef, spec, channel, torque, scales=None) -> np.ndarray:
     """Twist (rad) against one torque channel alone: the sum of that channel's terms."""
     names = compliance_names(spec)
     torque = np.asarray(torque, dtype=np.float64)
@@ -150,5 +176,5 @@ def compliance_curve(coef, spec, channel, torque) -> np.ndarray:
     for k, name in zip(coef, names):
         ch, term = name.split(":")
         if ch == channel:
-            out += k * TERMS[term](torque)
+            out += k * _term(ch, term, torque, scales)
     return out

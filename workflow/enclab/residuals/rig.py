@@ -35,6 +35,13 @@ last reversal) and ``all`` (every sample after ``t_skip``). The residual is the 
 
 Splits (:func:`make_folds`): by a condition (train on some values, test on others; or leave one
 value out) and leave-one-run-out.
+
+Choices made on held-out data (:func:`choose_model`), on each fold's training runs alone with
+groups of them held out in turn (:func:`inner_groups`: by the fold's condition): the knot
+spacing, and the model form (:func:`takeup_variants`: the declared compliance or the play
+take-up ``tanh(T / T0)`` in place of ``T|T|``, with or without the reversal transient). An
+input-side calibration map (harmonics of ``gear_ratio * truth``) is available when a gear ratio
+is declared (``RigSpec(gear_ratio=..., input_harmonics=...)``).
 """
 from __future__ import annotations
 
@@ -48,7 +55,8 @@ from enclab.residuals.calibration import MapBasis, compliance_columns, complianc
 from enclab.residuals.effects import motion_sign, play_operator
 
 __all__ = ["Run", "RigSpec", "RigFit", "steady_mask", "fit_rig", "predict_run", "score_run",
-           "choose_spacing", "make_folds", "evaluate", "pooled", "fold_spread", "floor_std", "map_range",
+           "choose_spacing", "choose_variant", "input_columns", "choose_model", "takeup_variants", "heldout_rms",
+           "inner_groups", "make_folds", "evaluate", "pooled", "fold_spread", "floor_std", "map_range",
            "run_from_canonical"]
 
 
@@ -95,7 +103,10 @@ class RigSpec:
     spacing : float or None
         Knot spacing (rad) of the calibration map; ``None`` = no map.
     compliance : dict
-        ``{torque channel: [term, ...]}`` (terms ``linear``, ``signed_square``); empty = none.
+        ``{torque channel: [term, ...]}`` (terms ``linear``, ``signed_square``, ``saturating``);
+        empty = none.
+    torque_scales : dict
+        ``{torque channel: T0}`` (N m) of the ``saturating`` terms (play take-up ``tanh(T / T0)``).
     max_play : float
         Upper bound of the play width (rad).
     transient : float or None
@@ -103,6 +114,13 @@ class RigSpec:
         truth's travel since the last reversal, odd in the direction of motion, vanishing from
         ``travel`` on (the mean motion of the measured side inside the play that a play
         operator cannot follow); ``None`` = none.
+    gear_ratio : float or None
+        Input angle per truth angle (e.g. 35 for a 35:1 gear whose input encoder, read on the
+        output side, is the truth): the input-side map's angle is ``gear_ratio * truth``.
+    input_harmonics : int
+        Harmonics per input-side revolution of the input-side calibration map (0 = none): a
+        repeatable error of the input encoder or the gear mesh, periodic in the input angle
+        (a spline of the output angle cannot hold it once a stroke spans many input turns).
     travel, t_skip : float
         Steady strokes: more than ``travel`` rad since the last reversal; every score leaves
         out the first ``t_skip`` s (and the fit does too).
@@ -116,8 +134,11 @@ class RigSpec:
     scale: bool = True
     spacing: float | None = 0.05
     compliance: Mapping = field(default_factory=dict)
+    torque_scales: Mapping = field(default_factory=dict)
     max_play: float = 0.08
     transient: float | None = None
+    gear_ratio: float | None = None
+    input_harmonics: int = 0
     travel: float = 0.06
     t_skip: float = 1.5
     n_iter: int = 20
@@ -128,7 +149,7 @@ class RigSpec:
         return RigSpec(**d)
 
 
-_CURVES = ("map", "transient")
+_CURVES = ("map", "transient", "input")
 
 
 @dataclass
@@ -148,7 +169,12 @@ class RigFit:
     def shared(self) -> dict:
         """``{name: value}`` of the scalar shared coefficients (scale, latency, compliance); the
         map and the reversal transient are curves (:meth:`map_curve`)."""
-        return {n: float(c) for n, c in zip(self.names, self.coef) if not n.startswith(_CURVES)}
+        out = {n: float(c) for n, c in zip(self.names, self.coef) if not n.startswith(_CURVES)}
+        for n in list(out):
+            channel, _, term = n.partition(":")
+            if term == "saturating":
+                out[f"{channel}:T0"] = float(self.spec.torque_scales[channel])
+        return out
 
     def ci(self, z: float = 1.6449) -> dict:
         """``{name: (lo, hi)}`` 90 % intervals (jackknife) of the scalar shared coefficients."""
@@ -157,6 +183,22 @@ class RigFit:
         sd = np.sqrt(np.diag(self.cov))
         return {n: (float(c - z * s), float(c + z * s)) for n, c, s in zip(self.names, self.coef, sd)
                 if not n.startswith(_CURVES)}
+
+    def input_curve(self, phi, z: float = 1.6449):
+        """The input-side calibration map at input angles ``phi`` (rad): ``(curve, lo, hi)``,
+        what it adds to the reading (rad, measured side), with a 90 % jackknife band; zeros
+        without one."""
+        phi = np.asarray(phi, dtype=np.float64)
+        idx = [i for i, n in enumerate(self.names) if n.startswith("input")]
+        if not idx:
+            zero = np.zeros_like(phi)
+            return zero, zero, zero
+        D = input_columns(phi, self.spec.input_harmonics)
+        curve = D @ self.coef[idx]
+        if self.cov is None:
+            return curve, curve, curve
+        sd = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", D, self.cov[np.ix_(idx, idx)], D), 0.0))
+        return curve, curve - z * sd, curve + z * sd
 
     def map_curve(self, a, z: float = 1.6449):
         """The calibration map at ``a``: ``(curve, lo, hi)`` with a 90 % jackknife band (the
@@ -224,6 +266,14 @@ def reversal_travel(truth, hysteresis: float = 2e-4) -> tuple[np.ndarray, np.nda
     return travel, d
 
 
+def input_columns(phi, harmonics: int) -> np.ndarray:
+    """``cos(k phi), sin(k phi)`` for ``k = 1..harmonics`` of the input angle ``phi`` (rad):
+    the columns of the input-side calibration map (no constant: that is the offset)."""
+    phi = np.asarray(phi, dtype=np.float64)
+    k = np.arange(1, int(harmonics) + 1)
+    return np.hstack([np.cos(np.outer(phi, k)), np.sin(np.outer(phi, k))])
+
+
 def transient_columns(truth, spacing: float, travel: float) -> np.ndarray:
     """Columns of the reversal transient: cubic B-splines in the travel since the last
     reversal on ``[0, travel]`` (knots every ``spacing``), times the direction; the two that do
@@ -255,7 +305,13 @@ def _shared_columns(run: Run, spec: RigSpec, basis: MapBasis | None, a_mid: floa
         cols.append(D)
     if spec.compliance:
         names += compliance_names(spec.compliance)
-        cols.append(compliance_columns(spec.compliance, run.torques))
+        cols.append(compliance_columns(spec.compliance, run.torques, spec.torque_scales))
+    if spec.input_harmonics:
+        if not spec.gear_ratio:
+            raise ValueError(f"run {run.run_id!r}: an input-side map needs a gear ratio")
+        k = range(1, spec.input_harmonics + 1)
+        names += [f"input_cos{j}" for j in k] + [f"input_sin{j}" for j in k]
+        cols.append(input_columns(spec.gear_ratio * run.truth, spec.input_harmonics))
     if spec.transient:
         T = transient_columns(run.truth, spec.transient, spec.travel)
         names += [f"transient{j}" for j in range(T.shape[1])]
@@ -445,36 +501,97 @@ def score_run(run: Run, prediction: np.ndarray, spec: RigSpec) -> dict:
             "all_ss": float(np.sum((e[every] - e[every].mean()) ** 2))}
 
 
-def choose_spacing(runs: Sequence[Run], spec: RigSpec, candidates: Sequence[float],
-                   widths: Mapping | None = None) -> tuple[float, dict]:
-    """Knot spacing of the map with the least leave-one-run-out error over ``runs``.
+def heldout_rms(runs: Sequence[Run], spec: RigSpec, widths: Mapping,
+                groups: Mapping | None = None, on: str = "all") -> float:
+    """Rms residual of each group of ``runs`` under the shared terms fitted without it.
 
-    The play widths are held at those of a fit with ``spec`` (its own spacing); for each
-    candidate the shared terms are refitted without each run in turn (from the summed normal
-    equations, minus the run's), and the left-out run's residual is taken after refitting its own
-    offset and latency. Returns ``(best spacing, {spacing: held-out rms})``.
+    The play widths start at ``widths``; the shared terms of ``spec`` are refitted without
+    each group in turn (from the summed normal equations, minus the group's), and the left-out
+    runs' residual is taken after refitting their own offset, latency and play width (one
+    linearised step). ``groups``:
+    ``{run id: group}`` (default: every run its own group, leave-one-run-out). ``on``: the
+    samples scored, ``"all"`` (after ``t_skip``) or ``"steady"`` (:func:`steady_mask`).
     """
+    if on not in ("all", "steady"):
+        raise ValueError(f"held-out score on {on!r}: expected 'all' or 'steady'")
+    groups = groups or {r.run_id: r.run_id for r in runs}
+    if len({groups[r.run_id] for r in runs}) < 2:
+        raise ValueError("a held-out choice needs at least 2 groups of runs")
+    lo, hi = map_range(runs, spec.t_skip)
+    basis = make_basis(runs, spec.spacing, spec.t_skip) if spec.spacing else None
+    # The left-out runs' play widths are refitted too (their linearised step, like a held-out
+    # run's own width): widths fitted under one form would otherwise favour that form.
+    _, eqs = _normal_equations(runs, spec, basis, 0.5 * (lo + hi), widths, play_step=True)
+    G = sum(e[0] for e in eqs)
+    h = sum(e[1] for e in eqs)
+    ss, n = 0.0, 0
+    keep = {r.run_id: (steady_mask(r.t, r.truth, spec.travel, spec.t_skip)[_fit_mask(r, spec)]
+                       if on == "steady" else slice(None)) for r in runs}
+    for key in dict.fromkeys(groups[r.run_id] for r in runs):
+        inside = [(r.run_id, e) for r, e in zip(runs, eqs) if groups[r.run_id] == key]
+        beta = _solve(G - sum(e[0] for _, e in inside), h - sum(e[1] for _, e in inside))
+        for run_id, (_, _, Xp, zp, *_) in inside:
+            r = (zp - Xp @ beta)[keep[run_id]]
+            ss += float(r @ r)
+            n += r.size
+    return float(np.sqrt(ss / n))
+
+
+def choose_spacing(runs: Sequence[Run], spec: RigSpec, candidates: Sequence[float],
+                   widths: Mapping | None = None, groups: Mapping | None = None) -> tuple[float, dict]:
+    """Knot spacing of the map with the least held-out error over ``runs``
+    (:func:`heldout_rms`; the play widths of a fit with ``spec``, its own spacing, unless
+    given). Returns ``(best spacing, {spacing: held-out rms})``."""
     if len(runs) < 2:
         raise ValueError("choosing the knot spacing on held-out runs needs at least 2 runs")
     if widths is None:
         base = fit_rig(runs, spec)
         widths = {k: v["play_width"] for k, v in base.per_run.items()}
-    lo, hi = map_range(runs, spec.t_skip)
-    scores = {}
-    for s in candidates:
-        basis = make_basis(runs, s, spec.t_skip)
-        _, eqs = _normal_equations(runs, spec, basis, 0.5 * (lo + hi), widths)
-        G = sum(e[0] for e in eqs)
-        h = sum(e[1] for e in eqs)
-        ss, n = 0.0, 0
-        for g, hh, Xp, zp, *_ in eqs:
-            beta = _solve(G - g, h - hh)
-            r = zp - Xp @ beta
-            ss += float(r @ r)
-            n += r.size
-        scores[float(s)] = float(np.sqrt(ss / n))
+    scores = {float(s): heldout_rms(runs, spec.with_(spacing=float(s)), widths, groups) for s in candidates}
     best = min(scores, key=scores.get)
     return best, scores
+
+
+def takeup_variants(runs: Sequence[Run], spec: RigSpec, relative: Sequence[float] = (0.1, 0.2, 0.4, 0.8),
+                    transient: bool = True) -> list[dict]:
+    """Candidate compliance forms and reversal transients to choose from on held-out runs.
+
+    For every torque channel declared with ``signed_square``, a candidate replaces it with the
+    play take-up ``saturating`` ``tanh(T / T0)``, ``T0`` = each of ``relative`` times the
+    channel's std over ``runs`` (no constant of a particular rig). With ``transient`` (and a
+    transient in ``spec``) each candidate also comes without the reversal transient: the
+    transient is a function of travel, the take-up one of torque, and at the training runs'
+    loads the two can coincide. Returns a list of :meth:`RigSpec.with_` keyword dicts, the
+    declared form first.
+    """
+    channels = [c for c, terms in spec.compliance.items() if "signed_square" in terms]
+    forms = [{}]
+    for q in relative:
+        if not channels:
+            break
+        comp = {c: [("saturating" if t == "signed_square" else t) for t in terms]
+                for c, terms in spec.compliance.items()}
+        scales = {c: float(q * np.std(np.concatenate([r.torques[c] for r in runs]))) for c in channels}
+        forms.append({"compliance": comp, "torque_scales": scales})
+    if transient and spec.transient:
+        forms = forms + [{**f, "transient": None} for f in forms]
+    return forms
+
+
+def choose_variant(runs: Sequence[Run], spec: RigSpec, variants: Sequence[Mapping],
+                   widths: Mapping | None = None, groups: Mapping | None = None,
+                   on: str = "steady") -> tuple[RigSpec, list]:
+    """The variant of ``spec`` (:meth:`RigSpec.with_` keyword dicts) with the least held-out
+    error (:func:`heldout_rms`) on steady strokes (``on``): a compliance is a twist of the
+    transmission under load, what the steady strokes show; the reversal windows are dominated by
+    the motion inside the play, which a more flexible transient always fits better in-sample
+    and which varies from one reversal to the next. Returns ``(best spec, [held-out rms per
+    variant])``."""
+    if widths is None:
+        base = fit_rig(runs, spec)
+        widths = {k: v["play_width"] for k, v in base.per_run.items()}
+    scores = [heldout_rms(runs, spec.with_(**v), widths, groups, on) for v in variants]
+    return spec.with_(**variants[int(np.argmin(scores))]), scores
 
 
 # ----------------------------------------------------------------------------- splits
@@ -514,7 +631,7 @@ def make_folds(runs: Sequence[Run], splits: Sequence[Mapping]) -> list[dict]:
             if not train or not test:
                 raise ValueError(f"split {name!r}: no run with {by} in train {sp.get('train')} or test "
                                  f"{sp.get('test')}; values present {sorted(set(map(str, values)))}")
-            folds.append({"split": name, "fold": f"{by} {sp.get('test')}", "train": train, "test": test})
+            folds.append({"split": name, "fold": f"{by} {sp.get('test')}", "by": by, "train": train, "test": test})
         else:
             levels = []
             for v in values:
@@ -522,18 +639,30 @@ def make_folds(runs: Sequence[Run], splits: Sequence[Mapping]) -> list[dict]:
                     levels.append(v)
             for v in levels:
                 test = [r.run_id for r in runs if _same(r.conditions[by], v)]
-                folds.append({"split": name, "fold": f"{by}={v}",
+                folds.append({"split": name, "fold": f"{by}={v}", "by": by,
                               "train": [i for i in ids if i not in test], "test": test})
     return folds
 
 
+def inner_groups(runs: Sequence[Run], by: str | None) -> dict:
+    """``{run id: group}`` for a choice on held-out runs inside a training set: the values of
+    the condition ``by`` when it takes at least 2 of them (the choice then extrapolates across
+    the condition as the fold does), else one group per run."""
+    if by and len({str(r.conditions.get(by)) for r in runs}) >= 2:
+        return {r.run_id: str(r.conditions.get(by)) for r in runs}
+    return {r.run_id: r.run_id for r in runs}
+
+
 def evaluate(runs: Sequence[Run], spec: RigSpec, folds: Sequence[Mapping],
              spacings: Sequence[float] | None = None,
-             keep_residuals: bool = False) -> tuple[list[dict], list[dict]]:
+             keep_residuals: bool = False, variants=None) -> tuple[list[dict], list[dict]]:
     """Fit on each fold's training runs, score every run of the fold.
 
     ``spacings``: candidate knot spacings chosen per fold on the training runs alone
-    (:func:`choose_spacing`); ``None`` keeps ``spec.spacing``.
+    (:func:`choose_spacing`); ``None`` keeps ``spec.spacing``. ``variants``: candidate model
+    forms (:meth:`RigSpec.with_` keyword dicts, or ``"takeup"`` for :func:`takeup_variants` of
+    the training runs) chosen per fold on the training runs alone, before the spacing. Both
+    choices hold out groups of training runs (:func:`inner_groups`: by the fold's condition).
 
     Returns
     -------
@@ -553,11 +682,8 @@ def evaluate(runs: Sequence[Run], spec: RigSpec, folds: Sequence[Mapping],
         before[r.run_id] = score_run(r, r.truth + c, spec)
     for fold in folds:
         train = [by_id[i] for i in fold["train"]]
-        fspec = spec
-        scores = None
-        if spacings and spec.spacing:
-            best, scores = choose_spacing(train, spec, spacings)
-            fspec = spec.with_(spacing=best)
+        fspec, scores, vscores = choose_model(train, spec, spacings, variants,
+                                              inner_groups(train, fold.get("by")))
         fit = fit_rig(train, fspec)
         kept = {}
         for role, ids in (("train", fold["train"]), ("test", fold["test"])):
@@ -575,9 +701,31 @@ def evaluate(runs: Sequence[Run], spec: RigSpec, folds: Sequence[Mapping],
                              "n_steady": sc["n_steady"], "n_all": sc["n_all"],
                              "steady_ss": sc["steady_ss"], "all_ss": sc["all_ss"],
                              "floor_std": floor_std(run.step, run.truth_step), **per})
-        out.append({**fold, "spacing": fspec.spacing, "spacing_scores": scores, "fit": fit,
+        out.append({**fold, "spacing": fspec.spacing, "spacing_scores": scores, "variant_scores": vscores,
+                    "fit": fit,
                     **({"residuals": kept} if keep_residuals else {})})
     return rows, out
+
+
+def choose_model(runs: Sequence[Run], spec: RigSpec, spacings: Sequence[float] | None = None,
+                 variants=None, groups: Mapping | None = None) -> tuple[RigSpec, dict | None, list | None]:
+    """The model form (``variants``) and then the knot spacing (``spacings``) with the least
+    held-out error over ``runs`` (groups of them held out in turn). Returns ``(spec, spacing
+    scores, variant scores)``; ``spec`` unchanged when there is nothing to choose."""
+    if variants == "takeup":
+        variants = takeup_variants(runs, spec)
+    if not (variants and len(variants) > 1) and not (spacings and spec.spacing):
+        return spec, None, None
+    base = fit_rig(runs, spec)
+    widths = {k: v["play_width"] for k, v in base.per_run.items()}
+    vscores = None
+    if variants and len(variants) > 1:
+        spec, vscores = choose_variant(runs, spec, variants, widths, groups)
+    scores = None
+    if spacings and spec.spacing:
+        best, scores = choose_spacing(runs, spec, spacings, widths, groups)
+        spec = spec.with_(spacing=best)
+    return spec, scores, vscores
 
 
 def pooled(rows: Sequence[Mapping], role: str = "test") -> dict:
@@ -622,7 +770,8 @@ def simulate_rig(rng: np.random.Generator, conditions: Sequence[Mapping], *, dur
                  fs: float = 1000.0, amplitude: float = 0.5, step: float = 2 * np.pi / 8192,
                  truth_step: float = 2 * np.pi / 146860, scale: float = 0.0, map_fn=None,
                  compliance: Mapping | None = None, play_width=0.02, latency=0.0,
-                 torque_gain: float = 0.1) -> list[Run]:
+                 torque_gain: float = 0.1, torque_scales: Mapping | None = None,
+                 gear_ratio: float | None = None, input_map_fn=None) -> list[Run]:
     """Runs of a simulated rig with known shared and per-run effects.
 
     Each condition ``{"frequency_hz": f, "load": L, ...}`` gives one run: the truth is a sine of
@@ -633,7 +782,10 @@ def simulate_rig(rng: np.random.Generator, conditions: Sequence[Mapping], *, dur
     ``q(y + scale (y - amplitude) + map_fn(y))``; the truth is read on ``truth_step``.
 
     ``play_width`` and ``latency`` are numbers or sequences (one per run). ``compliance`` is
-    ``{"torque_back:linear": k1, "torque_back:signed_square": k2, "torque_front:linear": k3}``.
+    ``{"torque_back:linear": k1, "torque_back:signed_square": k2, "torque_front:linear": k3}``
+    (``"torque_back:saturating": k`` with ``torque_scales={"torque_back": T0}``: ``k tanh(T / T0)``).
+    ``input_map_fn(phi)`` (rad, truth side) is an error of the truth reading periodic in the
+    input angle ``phi = gear_ratio * theta``: the truth reads ``theta + input_map_fn(phi)``.
     """
     runs = []
     n = int(round(duration * fs))
@@ -659,10 +811,13 @@ def simulate_rig(rng: np.random.Generator, conditions: Sequence[Mapping], *, dur
         y = play_operator(theta(t - tau), w)
         for name, k in (compliance or {}).items():
             channel, term = name.split(":")
-            y = y + k * compliance_columns({channel: [term]}, torques)[:, 0]
+            y = y + k * compliance_columns({channel: [term]}, torques, torque_scales)[:, 0]
         reading = y + scale * (y - amplitude) + (map_fn(y) if map_fn is not None else 0.0)
         measured = step * np.round(reading / step)
-        truth = truth_step * np.round(theta(t) / truth_step) if truth_step else theta(t)
+        th = theta(t)
+        if input_map_fn is not None:
+            th = th + input_map_fn(gear_ratio * th)
+        truth = truth_step * np.round(th / truth_step) if truth_step else th
         runs.append(Run(run_id=f"run{i:02d}", t=t, truth=truth, measured=measured, step=step,
                         truth_step=truth_step, torques=torques, conditions=dict(cond)))
     return runs

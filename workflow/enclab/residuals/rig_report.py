@@ -61,8 +61,12 @@ def remains(runs: Sequence[rg.Run], residuals: Mapping, spec: rg.RigSpec, bin_wi
 
 
 def analyse_rig(runs: Sequence[rg.Run], spec: rg.RigSpec, splits: Sequence[Mapping],
-                spacings: Sequence[float] | None) -> dict:
+                spacings: Sequence[float] | None, variants=None) -> dict:
     """Held-out evaluation of one rig and one measured channel, and the fit on every run.
+
+    ``variants``: candidate model forms chosen per fold on its training runs
+    (:func:`enclab.residuals.rig.evaluate`; ``"takeup"``: the declared compliance or the play
+    take-up, with or without the reversal transient).
 
     Returns
     -------
@@ -73,15 +77,12 @@ def analyse_rig(runs: Sequence[rg.Run], spec: rg.RigSpec, splits: Sequence[Mappi
         spacing chosen by leave-one-run-out) and ``spacing_scores``.
     """
     folds = rg.make_folds(runs, splits)
-    rows, out = rg.evaluate(runs, spec, folds, spacings, keep_residuals=True)
+    rows, out = rg.evaluate(runs, spec, folds, spacings, keep_residuals=True, variants=variants)
     rem = {}
     for split in dict.fromkeys(f["split"] for f in out):
         res = {k: v for f in out if f["split"] == split for k, v in f["residuals"].items()}
         rem[split] = remains(runs, res, spec)
-    fspec, scores = spec, None
-    if spacings and spec.spacing:
-        best, scores = rg.choose_spacing(runs, spec, spacings)
-        fspec = spec.with_(spacing=best)
+    fspec, scores, _ = rg.choose_model(runs, spec, spacings, variants)
     final = rg.fit_rig(runs, fspec)
     return {"rows": rows, "folds": out, "spread": rg.fold_spread(out) if out else {}, "remains": rem,
             "final": final, "spacing_scores": scores, "spec": spec}
@@ -126,10 +127,22 @@ def _grid(fit: rg.RigFit, n: int = 400) -> np.ndarray:
 
 def map_figure(result: Mapping, title: str = "") -> Figure:
     """The calibration map of the fit on all runs with its 90 % band, the scale's line over
-    the reference range, and each fold's map (thin)."""
+    the reference range, and each fold's map (thin); with an input-side map, a second panel of
+    it over one input revolution."""
     fit = result["final"]
     fig = Figure(figsize=(7.5, 4.2), layout="constrained")
-    ax = fig.add_subplot()
+    if fit.spec.input_harmonics:
+        ax, ax_in = fig.subplots(1, 2, width_ratios=[2, 1])
+        phi = np.linspace(0, 2 * np.pi, 200)
+        c, lo_in, hi_in = fit.input_curve(phi)
+        ax_in.fill_between(phi, lo_in * MRAD, hi_in * MRAD, color="C2", alpha=0.3, lw=0, label="90 % band")
+        ax_in.plot(phi, c * MRAD, color="C2", lw=1.5, label=f"{fit.spec.input_harmonics} harmonics")
+        ax_in.set_xlabel("input-side angle (rad, one revolution)")
+        ax_in.set_ylabel("input-side map (mrad, measured side)")
+        ax_in.set_title(f"input side, gear ratio {fit.spec.gear_ratio:g}", fontsize=9)
+        ax_in.legend(fontsize=7)
+    else:
+        ax = fig.add_subplot()
     if fit.basis is None:
         ax.text(0.5, 0.5, "no calibration map in this model", ha="center", transform=ax.transAxes)
         return fig
@@ -151,6 +164,20 @@ def map_figure(result: Mapping, title: str = "") -> Figure:
     return fig
 
 
+def term_label(name: str, spec: rg.RigSpec) -> str:
+    """``T``, ``T|T|`` or ``tanh(T/T0)`` of a compliance coefficient's name."""
+    channel, _, term = name.partition(":")
+    if term == "saturating":
+        return f"tanh(T/{spec.torque_scales[channel]:.3g} N m)"
+    return "T|T|" if term == "signed_square" else "T"
+
+
+def _channel_curve(fit: rg.RigFit, channel: str, T: np.ndarray) -> np.ndarray:
+    names = compliance_names(fit.spec.compliance)
+    coef = [fit.coef[fit.names.index(n)] for n in names]
+    return compliance_curve(coef, fit.spec.compliance, channel, T, fit.spec.torque_scales)
+
+
 def compliance_figure(result: Mapping, torques: Mapping, title: str = "") -> Figure:
     """Twist of the measured side against each torque channel (the channel's terms alone), fit
     on all runs with a 90 % jackknife band, over the logged torque range; each fold thin."""
@@ -167,23 +194,23 @@ def compliance_figure(result: Mapping, torques: Mapping, title: str = "") -> Fig
         ax = fig.add_subplot(1, len(channels), k + 1)
         lo, hi = torques[ch]
         T = np.linspace(lo, hi, 200)
-        coef = [fit.coef[idx[n]] for n in names]
-        curve = compliance_curve(coef, spec, ch, T)
+        curve = _channel_curve(fit, ch, T)
         if fit.cov is not None:
             cols = [n for n in names if n.startswith(ch + ":")]
-            J = np.column_stack([compliance_curve([1.0 if m == n else 0.0 for m in names], spec, ch, T) for n in cols])
+            J = np.column_stack([compliance_curve([1.0 if m == n else 0.0 for m in names], spec, ch, T,
+                                                  fit.spec.torque_scales) for n in cols])
             ii = [idx[n] for n in cols]
             sd = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", J, fit.cov[np.ix_(ii, ii)], J), 0))
             ax.fill_between(T, (curve - 1.6449 * sd) * MRAD, (curve + 1.6449 * sd) * MRAD, color="C1",
                             alpha=0.3, lw=0, label="90 % band")
         ax.plot(T, curve * MRAD, color="C1", lw=1.5, label="all runs")
         for f in result["folds"]:
-            c = [f["fit"].coef[f["fit"].names.index(n)] for n in names]
-            ax.plot(T, compliance_curve(c, spec, ch, T) * MRAD, lw=0.6, alpha=0.7, label=f"fold {f['fold']}")
+            if ch in f["fit"].spec.compliance:
+                ax.plot(T, _channel_curve(f["fit"], ch, T) * MRAD, lw=0.6, alpha=0.7, label=f"fold {f['fold']}")
         ax.axhline(0, color="k", lw=0.5)
         ax.set_xlabel(f"{ch} (N m)")
         ax.set_ylabel("twist (mrad)")
-        terms = " + ".join(f"{fit.coef[idx[n]]:+.3g} {'T|T|' if n.endswith('signed_square') else 'T'}"
+        terms = " + ".join(f"{fit.coef[idx[n]]:+.3g} {term_label(n, fit.spec)}"
                            for n in names if n.startswith(ch + ":"))
         ax.set_title(f"{ch}: {terms} (rad, N m)", fontsize=8)
         ax.legend(fontsize=6)
@@ -255,9 +282,21 @@ def markdown(name: str, channel: str, result: Mapping, conditions: Sequence[str]
                           + (["latency"] if fit.spec.latency == "shared" else [])
                           + ([f"calibration map (knots every {fit.spec.spacing:g} rad, chosen on "
                               "held-out runs)"] if fit.spec.spacing else [])
-                          + ([f"compliance {compliance_names(fit.spec.compliance)}"] if fit.spec.compliance else [])
-                          + ([f"reversal transient (knots every {fit.spec.transient:g} rad)"] if fit.spec.transient else []))
+                          + (["compliance " + ", ".join(f"{n.split(':')[0]} {term_label(n, fit.spec)}"
+                                                         for n in compliance_names(fit.spec.compliance))]
+                             if fit.spec.compliance else [])
+                          + ([f"reversal transient (knots every {fit.spec.transient:g} rad)"] if fit.spec.transient else [])
+                          + ([(f"input-side map ({fit.spec.input_harmonics} harmonics per input revolution, "
+                               f"gear ratio {fit.spec.gear_ratio:g})")] if fit.spec.input_harmonics else []))
               + ".", ""]
+    forms = [f for f in result["folds"] if f.get("variant_scores")]
+    if forms:
+        lines += ["Model form per fold, chosen on the steady strokes of its training runs (groups of them "
+                  "held out in turn): " + "; ".join(
+                      f"{f['fold']}: " + ", ".join(f"{n.split(':')[0]} {term_label(n, f['fit'].spec)}"
+                                                  for n in compliance_names(f["fit"].spec.compliance))
+                      + (f", reversal transient (knots every {f['fit'].spec.transient:g} rad)"
+                         if f["fit"].spec.transient else ", no reversal transient") for f in forms) + ".", ""]
     lines += ["## Held out", "", "Residual std (mrad) of reading - prediction on runs the shared terms never "
               f"saw (their own {per_run} refitted): *steady* = strokes with more than "
               f"{fit.spec.travel:g} rad of truth travel since the last reversal, *all* = every sample after "
@@ -333,6 +372,8 @@ def markdown(name: str, channel: str, result: Mapping, conditions: Sequence[str]
 
 def _fit_block(fit: rg.RigFit) -> dict:
     block = {"spacing": fit.spec.spacing, "shared": fit.shared(),
+             "compliance": dict(fit.spec.compliance), "torque_scales": dict(fit.spec.torque_scales),
+             "transient": fit.spec.transient,
              "ci90": {k: list(v) for k, v in fit.ci().items()}, "per_run": fit.per_run,
              "train": list(fit.train_ids)}
     if fit.basis is not None:
@@ -340,16 +381,22 @@ def _fit_block(fit: rg.RigFit) -> dict:
         curve, lo, hi = fit.map_curve(a)
         block["map"] = {"angle": a.tolist(), "curve": curve.tolist(), "band_lo": lo.tolist(),
                         "band_hi": hi.tolist(), "scale_reference_range": list(fit.basis.ref)}
+    if fit.spec.input_harmonics:
+        phi = np.linspace(0, 2 * np.pi, 101)
+        curve, lo, hi = fit.input_curve(phi)
+        block["input_map"] = {"input_angle": phi.tolist(), "curve": curve.tolist(), "band_lo": lo.tolist(),
+                              "band_hi": hi.tolist(), "gear_ratio": fit.spec.gear_ratio,
+                              "harmonics": fit.spec.input_harmonics}
     return block
 
 
 def report_rig(name: str, channel: str, runs: Sequence[rg.Run], spec: rg.RigSpec,
                splits: Sequence[Mapping], spacings: Sequence[float] | None,
-               truth_counts_per_rev: float | None = None) -> dict:
+               truth_counts_per_rev: float | None = None, variants=None) -> dict:
     """Everything the rig rule writes for one measured channel: ``block`` (JSON), ``tables``
     (``heldout`` per fold and run, ``splits``, ``conditions``), ``figures`` (``map``,
     ``compliance``, ``heldout``, ``remains``) and ``markdown``."""
-    result = analyse_rig(runs, spec, splits, spacings)
+    result = analyse_rig(runs, spec, splits, spacings, variants)
     conditions = list(dict.fromkeys(k for r in runs for k in r.conditions))
     torques = {ch: (float(min(np.percentile(r.torques[ch], 0.5) for r in runs)),
                     float(max(np.percentile(r.torques[ch], 99.5) for r in runs))) for ch in spec.compliance}
@@ -365,7 +412,8 @@ def report_rig(name: str, channel: str, runs: Sequence[rg.Run], spec: rg.RigSpec
         "splits": split_table(result["rows"]).to_dict("records"),
         "heldout": rows,
         "folds": [{"split": f["split"], "fold": str(f["fold"]), "test": f["test"],
-                   "spacing_scores": f["spacing_scores"], **_fit_block(f["fit"])} for f in result["folds"]],
+                   "spacing_scores": f["spacing_scores"], "variant_scores": f.get("variant_scores"),
+                   **_fit_block(f["fit"])} for f in result["folds"]],
         "spread": result["spread"], "remains": result["remains"],
         "final": {**_fit_block(result["final"]), "spacing_scores": result["spacing_scores"]},
     }
