@@ -35,6 +35,11 @@ TABLES = [
      "Posterior and baseline estimators of paper 002 over simulated draws (`bench_lrde.py`)."),
     ("lrde_effects_summary.csv", "Low-resolution encoder: effects named and intervals kept",
      "Encoder, clock and motion effects on simulated logs (`bench_lrde_effects.py`)."),
+    ("lrde_truth_loop.csv", "Low-resolution encoder: the truth channel's findings in the fit",
+     "Hysteresis logs with a fine channel: named by the comparison alone and with the residual "
+     "stage's findings, coverage of A12, E_b, a and b before and after (`lrde_truth_loop.py`)."),
+    ("lrde_stage.csv", "Low-resolution encoder: stage cost",
+     "Wall time of the whole LRDE stage of the embedded logs (`bench_lrde_stage.py`; target 30 s)."),
     ("lrde_oracle_summary.csv", "Low-resolution encoder: the information bound",
      "The best RMSE any estimator could reach on the same draws (`lrde_oracle_bound.py`)."),
     ("lrde_throughput_summary.csv", "Low-resolution encoder: MCMC cost",
