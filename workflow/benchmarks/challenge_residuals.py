@@ -68,7 +68,7 @@ from enclab.residuals import diagnostics as dg  # noqa: E402
 from enclab.residuals.select import select_effects  # noqa: E402
 from enclab.residuals import select as sel  # noqa: E402
 from enclab.residuals import effects as fx  # noqa: E402
-from enclab.residuals.simulate import random_motion, simulate_log  # noqa: E402
+from enclab.residuals.simulate import random_map, random_motion, random_torque, simulate_log  # noqa: E402
 
 STEP = 2 * np.pi / 4096
 TRUTH_STEP = STEP / 8
@@ -127,6 +127,36 @@ PAIRS = [("backlash", "latency"), ("angle_harmonics", "scale_mismatch"), ("hyste
 
 
 ROTATING = ["scale_mismatch", "angle_harmonics", "latency", "missed_counts", "slow_drift"]
+#: Effects of their own cases (``--compliance``, ``--map``): drawn with the log's motion.
+MOTION_DRAWN = ["compliance_softening", "calibration_map"]
+#: Effects whose continuous parameters are checked against their 90 % intervals.
+COVERED = CONTINUOUS + ["compliance_softening"]
+
+
+def motion_effect(name: str, rng: np.random.Generator, motion, t) -> tuple[dict, dict]:
+    """Parameters of an effect drawn from the log's own motion, and the aux channels it needs.
+
+    ``compliance_softening``: the joint torque of the motion (:func:`random_torque`: inertia,
+    friction and gravity, peak 1-5 N m, logged with 0.5 % noise); a twist ``k1 T + k2 T|T|``
+    of 2-5 mrad at the peak torque before softening, softened by 25-50 % there (``k2`` of sign
+    opposite to ``k1``: a gear's play taken up gradually). ``calibration_map``: a smooth map
+    over the stroke (:func:`random_map`) of 1.5-4 mrad peak to peak with a bend every 1/4-1/8
+    of the stroke, its constant and slope removed (an offset and a scale, not a map).
+    """
+    if name == "compliance_softening":
+        peak = float(rng.uniform(1.0, 5.0))
+        torque = random_torque(rng, motion, t, peak)
+        k1 = float(rng.choice([-1.0, 1.0]) * rng.uniform(2e-3, 5e-3) / peak)
+        k2 = float(-k1 * rng.uniform(0.25, 0.5) / peak)
+        logged = torque + rng.normal(0.0, 0.005 * peak, t.size)
+        return {"k1": k1, "k2": k2}, {"torque": torque, "logged": {"torque": logged}}
+    if name == "calibration_map":
+        th = np.asarray(motion(t), dtype=float)
+        stroke = float(np.ptp(th))
+        m = random_map(rng, float(th.min()), float(th.max()), float(rng.uniform(1.5e-3, 4e-3)),
+                       stroke / float(rng.uniform(4.0, 8.0)))
+        return m, {}
+    raise ValueError(name)
 
 
 def _rotation(rng, duration):
@@ -160,7 +190,14 @@ def _make_log(rng, names, scales, rotating=False, close=False):
         amplitude = max(amplitude, 1.0)
         centre = float(np.pi - rng.uniform(0.2, 0.8) * amplitude) * rng.choice([-1.0, 1.0])
     motion = random_motion(rng, kind, duration, amplitude, centre)
-    eff = {n: nominal_effect(n, rng, scales.get(n, 1.0)) for n in names}
+    drawn = [n for n in names if n in MOTION_DRAWN]
+    eff = {n: nominal_effect(n, rng, scales.get(n, 1.0)) for n in names if n not in MOTION_DRAWN}
+    extra = {}
+    if drawn:
+        t = np.arange(int(round(duration * 1000.0))) / 1000.0
+        for n in drawn:
+            eff[n], more = motion_effect(n, rng, motion, t)
+            extra.update(more)
     if "missed_counts" in eff:
         eff["missed_counts"]["times"] = [duration * x for x in eff["missed_counts"]["times"]]
         if close:
@@ -170,7 +207,9 @@ def _make_log(rng, names, scales, rotating=False, close=False):
             gaps = rng.uniform(0.1, 1.0 / (k - 1), k - 1)
             eff["missed_counts"] = {"times": list(t0 + np.concatenate(([0.0], np.cumsum(gaps)))),
                                     "jumps": [int(rng.choice([-1, 1]) * rng.integers(1, 3)) for _ in range(k)]}
-    log = simulate_log(rng, motion, duration=duration, step=STEP, truth_step=TRUTH_STEP, effects=eff)
+    log = simulate_log(rng, motion, duration=duration, step=STEP, truth_step=TRUTH_STEP, effects=eff,
+                       torque=extra.get("torque"))
+    log["aux"] = extra.get("logged", {})
     return log, eff, {"duration": duration, "motion": kind, "amplitude": amplitude}
 
 
@@ -276,21 +315,22 @@ def _challenge_job(args):
     log, eff, meta = _make_log(rng, list(names), scales, rotating=rotating, close=kind == "missed_close")
     t0 = time.perf_counter()
     # a rotating axis's truth is a float channel: its grid (the floor) is the selection's to find
+    aux = log.get("aux") or None
     res = select_effects(log["t"], log["truth"], log["measured"], STEP, truth_step=None if rotating else TRUTH_STEP,
-                         line_pitch=LINE_PITCH)
+                         line_pitch=LINE_PITCH, aux=aux)
     wall = time.perf_counter() - t0
     chosen = [e.name for e in res.effects]
     alts = [(e.name, [a["name"] for a in e.indistinguishable]) for e in res.effects]
     cover = {}
     for e in res.effects:
-        if e.name in eff and e.name in CONTINUOUS:
+        if e.name in eff and e.name in COVERED:
             for p, (lo, hi) in e.ci.items():
                 true = eff[e.name][p]
                 cover[f"{e.name}.{p}"] = bool(lo <= true <= hi)
     ratio = res.after["std"] / res.after["floor_std"] if res.after["floor_std"] > 0 else float("inf")
     found = _found_true(res, eff, names, float(log["t"][-1] - log["t"][0]))
     r_after = log["measured"] - res.model_prediction()
-    ranking = dg.rank_covariates(r_after, dg.covariates_of(log["t"], log["truth"]))
+    ranking = dg.rank_covariates(r_after, dg.covariates_of(log["t"], log["truth"], aux))
     top = ranking[0] if ranking else {"name": "", "share": float("nan")}
     # every candidate's delta BIC against the base model (the first round of the selection):
     # tells a miss where the true effect was below the criterion from one where another won
@@ -319,6 +359,8 @@ def _challenge_job(args):
         # covariate ranking points at the covariate of the true effect's signature
         "named": bool(_matches(alts, names) or (not res.explained and names
                                                 and top["name"] == SIGNATURE_COVARIATE.get(names[0]))),
+        # named by the effect itself (or an alternative the report names as not distinguishable)
+        "named_effect": bool(names) and bool(_matches(alts, names)),
         "merged": json.dumps({e.name: e.merged_with for e in res.effects if e.merged_with}),
         "coverage": json.dumps(cover),
         "true_params": json.dumps({k: {kk: (vv if not isinstance(vv, list) else vv) for kk, vv in v.items()} for k, v in eff.items()}),
@@ -341,7 +383,8 @@ def _challenge_job(args):
 #: The covariate a residual of each effect follows when the effect is not modelled.
 SIGNATURE_COVARIATE = {"slow_drift": "time", "missed_counts": "time", "angle_harmonics": "angle",
                        "scale_mismatch": "angle", "latency": "velocity", "hysteresis": "direction",
-                       "backlash": "direction"}
+                       "backlash": "direction", "compliance_softening": "torque",
+                       "calibration_map": "angle"}
 
 
 def _found_true(res, eff, names, t_span: float) -> bool:
@@ -360,6 +403,9 @@ def _found_true(res, eff, names, t_span: float) -> bool:
                    for j in range(k))
     if e.name == "wrap_around":
         return e.params["period"] == true["period"]
+    if e.name == "calibration_map":
+        # the simulated map is no member of the fitted spline basis: no true coefficients
+        return False
     if e.name == "slow_drift":
         # the simulated drift is rate * (t - t_mid): c1 = rate T / 2, c2 = c3 = 0
         half = 0.5 * t_span
@@ -448,6 +494,8 @@ def summarize(df: pd.DataFrame) -> pd.DataFrame:
             "explained_given_found": (float(g.loc[g["found_true"].astype(bool), "explained"].astype(bool).mean())
                                       if g["found_true"].astype(bool).any() else float("nan")),
             "named_rate": float(g["named"].astype(bool).mean()),
+            "named_effect_rate": float(g["named_effect"].astype(bool).mean()),
+            "named_effect_ci90": _rate(int(g["named_effect"].astype(bool).sum()), n)[1],
             "wall_s_median": g["wall_s"].median(),
         }
         rows.append(row)
@@ -515,6 +563,9 @@ def main(argv=None):
     ap.add_argument("--missed-close", type=int, default=10,
                     help="logs with 2-4 missed counts within about a second of each other")
     ap.add_argument("--rotating", type=int, default=10, help="logs per effect on a rotating axis (float truth)")
+    ap.add_argument("--compliance", type=int, default=40,
+                    help="logs with an undeclared softening compliance against a logged torque")
+    ap.add_argument("--map", type=int, default=40, help="logs with an undeclared smooth calibration map")
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--seed", type=int, default=20261128)
     ap.add_argument("--out", default="results/benchmarks")
@@ -555,6 +606,8 @@ def main(argv=None):
     jobs += [("missed_close", ("missed_counts",), {}, next(seeds)) for _ in range(args.missed_close)]
     for n in ROTATING:
         jobs += [("rotating", (n,), scales, next(seeds)) for _ in range(args.rotating)]
+    jobs += [("compliance", ("compliance_softening",), {}, next(seeds)) for _ in range(args.compliance)]
+    jobs += [("map", ("calibration_map",), {}, next(seeds)) for _ in range(args.map)]
     df = pd.DataFrame(_map(_challenge_job, jobs, args.jobs))
     df["skipped"] = df["skipped"].astype(bool)
     summary = summarize(df)
@@ -602,10 +655,13 @@ def main(argv=None):
     print(rate_line("clean logs with no effect", len(clean) - kf, len(clean)))
     for kind, label in (("drift", "slow drift (undeclared) named by the effect or the covariate ranking"),
                         ("missed_close", "missed counts close together: the exact set"),
-                        ("rotating", "rotating axes (float truth): the exact set or a named alternative")):
+                        ("rotating", "rotating axes (float truth): the exact set or a named alternative"),
+                        ("compliance", "softening compliance (undeclared) named by the effect"),
+                        ("map", "smooth calibration map (undeclared) named by the effect")):
         g = ran[ran["kind"] == kind]
         if len(g):
-            col = "named" if kind == "drift" else ("exact" if kind == "missed_close" else "exact_or_indist")
+            col = {"drift": "named", "missed_close": "exact", "compliance": "named_effect",
+                   "map": "named_effect"}.get(kind, "exact_or_indist")
             print(rate_line(label, int(g[col].astype(bool).sum()), len(g)))
     found = ran[ran["found_true"].astype(bool)]
     print(rate_line("one true effect found with its true value -> explained", int(found["explained"].astype(bool).sum()),
