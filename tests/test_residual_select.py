@@ -372,7 +372,7 @@ def test_linear_columns_give_the_finite_difference_gradient():
     torque = rng.normal(size=log["t"].size)
     ctx = sel._make_ctx(log["t"], log["truth"], counts, STEP, TRUTH_STEP, {"torque": torque}, 0.0, None)
     cmap = sel.fx.CalibrationMap()
-    cmap.prepare(ctx, np.zeros(ctx.n))
+    cmap._set_basis(float(ctx.truth.min()), float(ctx.truth.max()), 0.2)
     effects = [sel.fx.SofteningCompliance(), cmap, sel.fx.SlowDrift()]
     for e in effects:
         assert e.applicable(ctx)

@@ -445,19 +445,24 @@ def _base_start(ctx):
     return np.array([c0, -1.0])
 
 
-def _continuous_residual(model, ctx, x):
-    """Residual (rad) of the readings' interval centres against the model's angle: the
-    readings ``step (k - c + 1/2)`` minus the effective angle, up to U(-step/2, step/2)."""
+def _exact_residual(model, ctx, x):
+    """The exact-model residual (rad): readings minus the model's quantized prediction,
+    ``step (k - floor(mu))``. Where an unmodelled shift ``m`` moves the transitions, the share
+    of samples read one count off is ``|m| / step`` on a motion that crosses them at every
+    position, so its mean over a stretch of angle is ``m``; on a clean log it is the truth's
+    rounding alone (isolated flips, mean zero), not the measured channel's sawtooth."""
     mu, _ = model.forward(ctx, x)
-    return ctx.step * (ctx.counts - x[0] + 0.5) - (mu - x[0]) * ctx.step
+    return ctx.step * (ctx.counts - np.floor(mu))
 
 
 def _extend(cur: _Fitted, e, ctx):
     """Fit ``cur`` plus effect ``e``; returns a _Fitted or None when ``e`` finds nothing."""
     if hasattr(e, "prepare"):
         # an effect whose basis is chosen from the data (a map's knot spacing, on held-out
-        # blocks of what the current model leaves) fixes its parameters before the fit
-        e.prepare(ctx, _continuous_residual(cur.model, ctx, cur.x))
+        # blocks of what the current model leaves) fixes its parameters before the fit, or
+        # declines when the held-out blocks show nothing for it
+        if not e.prepare(ctx, _exact_residual(cur.model, ctx, cur.x)):
+            return None
     model = _Model(cur.model.effects + [e])
     x0 = np.empty(model.size)
     # carry over current parameters by effect identity
@@ -527,6 +532,8 @@ def _alternatives(cur: _Fitted, chosen, step_trials, candidates, ctx, margin):
         alts = []
         for name in sorted(names):
             new = _swap(cur, e, pool[name], ctx)
+            if new is None:
+                continue
             k = new.model.n_params() - cur.model.n_params()
             d = 2.0 * (cur.ll - new.ll) + k * math.log(n_fit)
             i = new.model.effects.index(pool[name])
@@ -565,14 +572,24 @@ def _lr_pvalue(lr, k, n_boundary):
     return float(stats.chi2.sf(lr, k))
 
 
-def _folds(ctx, n_folds):
+def _folds(ctx, n_folds, interleave: int = 1):
+    """Held-out folds of ``ctx.fit_idx``: ``n_folds`` contiguous blocks, or with ``interleave``
+    > 1 ``n_folds * interleave`` blocks dealt round-robin to the folds (every fold then spans
+    the log: an effect that is a function of the angle, such as a map, is scored where its
+    training data reached). Block edges never split a run of one truth reading
+    (:func:`enclab.residuals.effects.run_blocks`)."""
     idx = ctx.fit_idx
-    return np.array_split(idx, n_folds)
+    if interleave <= 1:
+        return np.array_split(idx, n_folds)
+    blocks = fx.run_blocks(ctx.truth[idx], n_folds * interleave)
+    return [idx[np.concatenate(blocks[j::n_folds])] for j in range(n_folds)]
 
 
 def _heldout_gain(cur: _Fitted, new: _Fitted, ctx, n_folds):
+    added = [e for e in new.model.effects if e not in cur.model.effects]
+    interleave = max([getattr(e, "heldout_interleave", 1) for e in added] + [1])
     gain = 0.0
-    for fold in _folds(ctx, n_folds):
+    for fold in _folds(ctx, n_folds, interleave):
         train = np.setdiff1d(ctx.fit_idx, fold, assume_unique=True)
         xc, _ = _fit(cur.model, ctx, cur.x, idx=train, maxiter=100)
         xn, _ = _fit(new.model, ctx, new.x, idx=train, maxiter=100)
@@ -1101,6 +1118,8 @@ def select_effects(
             else:
                 e = cand
             new = _extend(cur, e, ctx)
+            if new is None:
+                continue
             k = new.model.n_params() - cur.model.n_params()
             dll = new.ll - cur.ll
             dbic = 2.0 * dll - k * math.log(n_fit)
