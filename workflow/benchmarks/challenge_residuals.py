@@ -133,7 +133,22 @@ MOTION_DRAWN = ["compliance_softening", "calibration_map"]
 COVERED = CONTINUOUS + ["compliance_softening"]
 
 
-def motion_effect(name: str, rng: np.random.Generator, motion, t) -> tuple[dict, dict]:
+def smooth_map(rng: np.random.Generator, lo: float, hi: float, peak_to_peak: float) -> dict:
+    """A smooth map outside the fitted spline family: three sines of the angle with wavelengths
+    of 1/5 to 2/3 of the stroke and random phases, constant and slope removed, as a dense
+    spline (a knot every 5 mrad) for :func:`simulate_log`."""
+    stroke = hi - lo
+    lam = rng.uniform(stroke / 5.0, stroke / 1.5, 3)
+    amp = rng.uniform(0.3, 1.0, 3)
+    ph = rng.uniform(0.0, 2.0 * np.pi, 3)
+    knots = np.linspace(lo, hi, max(int(stroke / 0.005), 8) + 1)
+    values = sum(a * np.sin(2.0 * np.pi * knots / w + p) for a, w, p in zip(amp, lam, ph))
+    values = values - np.polyval(np.polyfit(knots, values, 1), knots)
+    values = values * peak_to_peak / float(np.ptp(values))
+    return {"knots": [float(k) for k in knots], "values": [float(v) for v in values]}
+
+
+def motion_effect(name: str, rng: np.random.Generator, motion, t, map_shape: str = "spline") -> tuple[dict, dict]:
     """Parameters of an effect drawn from the log's own motion, and the aux channels it needs.
 
     ``compliance_softening``: the joint torque of the motion (:func:`random_torque`: inertia,
@@ -141,7 +156,9 @@ def motion_effect(name: str, rng: np.random.Generator, motion, t) -> tuple[dict,
     of 2-5 mrad at the peak torque before softening, softened by 25-50 % there (``k2`` of sign
     opposite to ``k1``: a gear's play taken up gradually). ``calibration_map``: a smooth map
     over the stroke (:func:`random_map`) of 1.5-4 mrad peak to peak with a bend every 1/4-1/8
-    of the stroke, its constant and slope removed (an offset and a scale, not a map).
+    of the stroke, its constant and slope removed (an offset and a scale, not a map); with
+    ``map_shape="smooth"`` a sum of sines of the angle instead (:func:`smooth_map`), which no
+    spline of the fitted family holds exactly.
     """
     if name == "compliance_softening":
         peak = float(rng.uniform(1.0, 5.0))
@@ -153,6 +170,8 @@ def motion_effect(name: str, rng: np.random.Generator, motion, t) -> tuple[dict,
     if name == "calibration_map":
         th = np.asarray(motion(t), dtype=float)
         stroke = float(np.ptp(th))
+        if map_shape == "smooth":
+            return smooth_map(rng, float(th.min()), float(th.max()), float(rng.uniform(1.5e-3, 4e-3))), {}
         m = random_map(rng, float(th.min()), float(th.max()), float(rng.uniform(1.5e-3, 4e-3)),
                        stroke / float(rng.uniform(4.0, 8.0)))
         return m, {}
@@ -171,7 +190,7 @@ def _rotation(rng, duration):
     return motion
 
 
-def _make_log(rng, names, scales, rotating=False, close=False):
+def _make_log(rng, names, scales, rotating=False, close=False, map_shape="spline"):
     duration = float(rng.uniform(10.0, 15.0))
     kind = str(rng.choice(["sine", "multisine", "smooth"]))
     amplitude = float(rng.uniform(0.5, 3.0))
@@ -196,7 +215,7 @@ def _make_log(rng, names, scales, rotating=False, close=False):
     if drawn:
         t = np.arange(int(round(duration * 1000.0))) / 1000.0
         for n in drawn:
-            eff[n], more = motion_effect(n, rng, motion, t)
+            eff[n], more = motion_effect(n, rng, motion, t, map_shape)
             extra.update(more)
     if "missed_counts" in eff:
         eff["missed_counts"]["times"] = [duration * x for x in eff["missed_counts"]["times"]]
@@ -312,7 +331,8 @@ def _challenge_job(args):
         scales = {name: 3.0 * thr}
     rng = np.random.default_rng(seed)
     rotating = kind == "rotating"
-    log, eff, meta = _make_log(rng, list(names), scales, rotating=rotating, close=kind == "missed_close")
+    log, eff, meta = _make_log(rng, list(names), scales, rotating=rotating, close=kind == "missed_close",
+                               map_shape="smooth" if kind == "map_smooth" else "spline")
     t0 = time.perf_counter()
     # a rotating axis's truth is a float channel: its grid (the floor) is the selection's to find
     aux = log.get("aux") or None
@@ -612,6 +632,8 @@ def main(argv=None):
     ap.add_argument("--compliance", type=int, default=40,
                     help="logs with an undeclared softening compliance against a logged torque")
     ap.add_argument("--map", type=int, default=40, help="logs with an undeclared smooth calibration map")
+    ap.add_argument("--map-smooth", type=int, default=0,
+                    help="logs with an undeclared map that is a sum of sines of the angle (outside the spline family)")
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--seed", type=int, default=20261128)
     ap.add_argument("--out", default="results/benchmarks")
@@ -665,6 +687,7 @@ def main(argv=None):
         jobs += [("rotating", (n,), scales, next(seeds)) for _ in range(args.rotating)]
     jobs += [("compliance", ("compliance_softening",), {}, next(seeds)) for _ in range(args.compliance)]
     jobs += [("map", ("calibration_map",), {}, next(seeds)) for _ in range(args.map)]
+    jobs += [("map_smooth", ("calibration_map",), {}, next(seeds)) for _ in range(args.map_smooth)]
     df = pd.DataFrame(_map(_challenge_job, jobs, args.jobs))
     df["skipped"] = df["skipped"].astype(bool)
     summary = summarize(df)
@@ -714,11 +737,12 @@ def main(argv=None):
                         ("missed_close", "missed counts close together: the exact set"),
                         ("rotating", "rotating axes (float truth): the exact set or a named alternative"),
                         ("compliance", "softening compliance (undeclared) named by the effect"),
-                        ("map", "smooth calibration map (undeclared) named by the effect")):
+                        ("map", "smooth calibration map (undeclared) named by the effect"),
+                        ("map_smooth", "map as a sum of sines of the angle (undeclared) named by the effect")):
         g = ran[ran["kind"] == kind]
         if len(g):
             col = {"drift": "named", "missed_close": "exact", "compliance": "named_effect",
-                   "map": "named_effect"}.get(kind, "exact_or_indist")
+                   "map": "named_effect", "map_smooth": "named_effect"}.get(kind, "exact_or_indist")
             print(rate_line(label, int(g[col].astype(bool).sum()), len(g)))
     found = ran[ran["found_true"].astype(bool)]
     print(rate_line("one true effect found with its true value -> explained", int(found["explained"].astype(bool).sum()),
