@@ -276,3 +276,65 @@ def test_distorted_sinusoid_terms_recovered_exactly_by_least_squares():
     assert math.atan2(coef[5], coef[4]) == pytest.approx(1.1, abs=1e-9)
     # with no distortion and no drift it is the plain sinusoid
     np.testing.assert_allclose(fx.distorted_sinusoid(t, 0.0, 1.0, 1.3, 0.4), np.sin(2 * np.pi * 1.3 * t + 0.4), atol=1e-12)
+
+
+# ------------------------------------------------------------ softening compliance and map
+def test_softening_compliance_is_k1_T_plus_k2_T_abs_T_about_their_means():
+    rng = np.random.default_rng(4)
+    tq = rng.uniform(-3.0, 3.0, 500)
+    theta = rng.uniform(-1.0, 1.0, 500)
+    k1, k2 = 1.2e-3, -2.5e-4
+    e = fx.SofteningCompliance()
+    got = e.apply(theta, None, None, {"torque": tq}, [k1, k2])
+    want = theta + k1 * (tq - tq.mean()) + k2 * (tq * np.abs(tq) - np.mean(tq * np.abs(tq)))
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-15)
+    # the analytic columns are the derivatives of the shift; the central differences carry the
+    # rounding of theta (|theta| <= 1) over their step h: eps / h, h = 1e-4 of the range
+    ctx = _Ctx(tq)
+    h = min(e.fd_steps(ctx))
+    np.testing.assert_allclose(np.column_stack(e.columns({"torque": tq})),
+                               e.signature(theta, None, None, {"torque": tq}, ctx), rtol=0,
+                               atol=8 * np.finfo(float).eps / h)
+    e.t_max = 3.0
+    d = e.derived({"k1": k1, "k2": k2})
+    assert d["softening"] == pytest.approx(-k2 * 3.0 / k1)
+    assert d["twist_at_max_torque"] == pytest.approx(k1 * 3.0 + k2 * 9.0)
+
+
+class _Ctx:
+    """The few context fields an effect's bounds and signature read."""
+
+    def __init__(self, torque, truth=None, step=STEP):
+        self.aux = {"torque": torque}
+        self.priv = {"_span": 20 * step}
+        self.step = step
+        self.truth = np.zeros_like(torque) if truth is None else truth
+        self.t = np.arange(np.size(torque)) * 1e-3
+        self.fit_idx = np.arange(np.size(torque))
+
+
+def test_calibration_map_spacing_is_chosen_on_heldout_data():
+    from enclab.residuals.calibration import MapBasis
+
+    rng = np.random.default_rng(11)
+    n = 20000
+    a = 0.6 * np.sin(2 * np.pi * 0.37 * np.arange(n) / 1000.0) + 0.1   # a 1.2 rad stroke, ~7 passes
+    lo, hi = float(a.min()), float(a.max())
+    true = MapBasis(lo, hi, (hi - lo) / 8, n_grid=801)
+    coef = rng.normal(0.0, 1e-3, true.n_columns)
+    # the quantization noise of a 4096-cpr reading: U(-step/2, step/2)
+    resid = true.design(a) @ coef + rng.uniform(-STEP / 2, STEP / 2, n)
+    ctx = _Ctx(np.zeros(n), truth=a)
+    e = fx.CalibrationMap()
+    assert e.applicable(ctx)
+    e.prepare(ctx, resid)
+    n_int = round((hi - lo) / e.basis.spacing)
+    # a basis holding the true knots (8, 16 or 24 intervals) fits it; 3, 4, 6 or 12 do not
+    assert n_int % 8 == 0
+    assert e.param_names == tuple(f"m{j + 1}" for j in range(e.basis.n_columns))
+    # the map acts on the smooth angle, its columns are its derivatives
+    aux = {"_smooth": a}
+    p = rng.normal(0.0, 1e-4, len(e.param_names))
+    np.testing.assert_allclose(e.apply(a, None, None, aux, p) - a, e.basis.design(a) @ p, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(e.columns(aux).T @ p, e.basis.design(a) @ p, rtol=0, atol=1e-15)
+    assert e.derived(dict(zip(e.param_names, p)))["spacing"] == pytest.approx(e.basis.spacing)

@@ -11,7 +11,7 @@ from scipy.special import log_ndtr
 
 from enclab.residuals import select as sel
 from enclab.residuals.select import select_effects
-from enclab.residuals.simulate import random_motion, simulate_log
+from enclab.residuals.simulate import random_map, random_motion, random_torque, simulate_log
 
 STEP = 2 * np.pi / 4096
 TRUTH_STEP = STEP / 8
@@ -298,3 +298,110 @@ def test_message_says_unexplained_and_names_indistinguishable_alternatives():
     assert "hysteresis not distinguishable from backlash (swap-in delta BIC 1.7)" in msg
     assert "latency" not in msg
     assert _message([], False, before).startswith("unexplained: the residual std 0.001 rad is 10x")
+
+
+# ------------------------------------------------------------ compliance, map, merge, floor
+def test_softening_compliance_is_found_with_its_values():
+    rng = np.random.default_rng(8)
+    duration = 6.0
+    motion = random_motion(rng, "multisine", duration, 1.0)
+    t = np.arange(int(duration * 1000)) / 1000.0
+    torque = random_torque(rng, motion, t, 3.0)
+    k1 = 4e-3 / 3.0
+    k2 = -0.4 * k1 / 3.0   # the play taken up gradually: 40 % less twist at the peak torque
+    log = simulate_log(rng, motion, duration=duration, step=STEP, truth_step=TRUTH_STEP,
+                       effects={"compliance_softening": {"k1": k1, "k2": k2}}, torque=torque)
+    res = select_effects(log["t"], log["truth"], log["measured"], STEP, truth_step=TRUTH_STEP,
+                         aux={"torque": torque})
+    assert [e.name for e in res.effects] == ["compliance_softening"]
+    (e,) = res.effects
+    for name, true in (("k1", k1), ("k2", k2)):
+        lo, hi = e.ci[name]
+        se = (hi - lo) / (2 * Z90)
+        assert abs(e.params[name] - true) <= 4 * se and se < 0.2 * abs(true)
+    assert e.derived["softening"] > 0   # k2 opposite to k1
+    # a straight line in the torque loses by more than the margin
+    assert {a["name"] for a in e.alternatives} >= {"compliance"}
+    assert e.indistinguishable == []
+    assert res.explained
+
+
+def test_calibration_map_is_found_and_matches_the_true_map():
+    from scipy.interpolate import CubicSpline
+
+    rng = np.random.default_rng(12)
+    duration = 8.0
+    motion = random_motion(rng, "sine", duration, 0.5)
+    t = np.arange(int(duration * 1000)) / 1000.0
+    th = motion(t)
+    m = random_map(rng, float(th.min()), float(th.max()), 3e-3, float(np.ptp(th)) / 6)
+    log = simulate_log(rng, motion, duration=duration, step=STEP, truth_step=TRUTH_STEP,
+                       effects={"calibration_map": m})
+    res = select_effects(log["t"], log["truth"], log["measured"], STEP, truth_step=TRUTH_STEP)
+    assert [e.name for e in res.effects] == ["calibration_map"]
+    assert res.after["std"] < 0.5 * res.before["std"]
+    e = next(x for x in res._fitted.model.effects if x.name == "calibration_map")
+    # against the simulated map over the stroke, both without constant and slope (a quantizer
+    # offset and a scale): the fitted curve is within a tenth of a count
+    grid = np.linspace(th.min() + 0.02, th.max() - 0.02, 500)
+    true = CubicSpline(m["knots"], m["values"])(grid)
+    fit = e.curve(res.effects[0].params, grid)
+    diff = true - fit
+    diff = diff - np.polyval(np.polyfit(grid, diff, 1), grid)
+    assert np.sqrt(np.mean(diff**2)) < 0.1 * STEP
+
+
+def test_multiple_correlation_is_the_correlation_for_single_parameters_and_sees_spans():
+    rng = np.random.default_rng(3)
+    # estimates of (a, b1, b2) whose covariance makes a nearly b1 + b2: no single pair shows it
+    z = rng.normal(size=(3, 4000))
+    est = np.vstack([z[1] + z[2] + 0.05 * z[0], z[1], z[2]])
+    cov = np.cov(est)
+    r_pair = [abs(np.corrcoef(est[0], est[j])[0, 1]) for j in (1, 2)]
+    assert max(r_pair) < 0.8
+    r = sel._multiple_correlation(cov, slice(0, 1), slice(1, 3))
+    # R^2 = 1 - var(0.05 z0) / var(a)
+    assert r == pytest.approx(math.sqrt(1 - 0.05**2 / (2 + 0.05**2)), abs=2e-3)
+    assert sel._multiple_correlation(cov, slice(1, 2), slice(0, 1)) == pytest.approx(r_pair[0], rel=1e-9)
+
+
+def test_linear_columns_give_the_finite_difference_gradient():
+    rng = np.random.default_rng(5)
+    log = _log(5, duration=3.0, amplitude=0.8)
+    counts = np.round(log["measured"] / STEP).astype(np.int64)
+    torque = rng.normal(size=log["t"].size)
+    ctx = sel._make_ctx(log["t"], log["truth"], counts, STEP, TRUTH_STEP, {"torque": torque}, 0.0, None)
+    cmap = sel.fx.CalibrationMap()
+    cmap._set_basis(float(ctx.truth.min()), float(ctx.truth.max()), 0.2)
+    effects = [sel.fx.SofteningCompliance(), cmap, sel.fx.SlowDrift()]
+    for e in effects:
+        assert e.applicable(ctx)
+    model = sel._Model(effects)
+    x = np.concatenate([[0.5, -1.0], rng.normal(0, 1e-4, model.size - 2)])
+    scales = model.scales(ctx)
+    assert set(model.linear_columns(ctx)) == set(range(2, 4)) | set(range(4, 4 + len(cmap.param_names)))
+    _, g = sel._scores(model, ctx, x, scales, ctx.fit_idx)
+    model.linear_columns = lambda ctx: {}
+    _, g_fd = sel._scores(model, ctx, x, scales, ctx.fit_idx)
+    np.testing.assert_allclose(g, g_fd, rtol=1e-5, atol=1e-6 * np.max(np.abs(g_fd)))
+
+
+def test_floor_interval_counts_a_repeated_pass_once():
+    # A log that passes the same angles three times (its first 3 s repeated exactly) holds no
+    # more information about the floor than the first pass: the truth's rounding flips the same
+    # samples each time. The floor is the same and so is its standard error (the time blocks
+    # alone gave 1/sqrt(3) of it).
+    log = _log(9, duration=3.0, amplitude=0.8, kind="multisine")
+    counts = np.round(log["measured"] / STEP).astype(np.int64)
+    n = log["t"].size
+    out = {}
+    for k in (1, 3):
+        t = np.arange(k * n) / 1000.0
+        ctx = sel._make_ctx(t, np.tile(log["truth"], k), np.tile(counts, k), STEP, TRUTH_STEP, {}, 0.0, None)
+        model = sel._Model([])
+        x, ll = sel._fit(model, ctx, sel._base_start(ctx))
+        out[k] = sel.residual_stats(sel._Fitted(model, x, ll), ctx)
+    assert out[3]["floor_std"] == pytest.approx(out[1]["floor_std"], rel=1e-6)
+    assert out[3]["std"] == pytest.approx(out[1]["std"], rel=1e-6)
+    half_width = {k: out[k]["floor_limit"] ** 2 - out[k]["floor_std"] ** 2 for k in (1, 3)}
+    assert half_width[3] == pytest.approx(half_width[1], rel=0.1)

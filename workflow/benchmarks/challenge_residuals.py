@@ -68,7 +68,7 @@ from enclab.residuals import diagnostics as dg  # noqa: E402
 from enclab.residuals.select import select_effects  # noqa: E402
 from enclab.residuals import select as sel  # noqa: E402
 from enclab.residuals import effects as fx  # noqa: E402
-from enclab.residuals.simulate import random_motion, simulate_log  # noqa: E402
+from enclab.residuals.simulate import random_map, random_motion, random_torque, simulate_log  # noqa: E402
 
 STEP = 2 * np.pi / 4096
 TRUTH_STEP = STEP / 8
@@ -127,6 +127,55 @@ PAIRS = [("backlash", "latency"), ("angle_harmonics", "scale_mismatch"), ("hyste
 
 
 ROTATING = ["scale_mismatch", "angle_harmonics", "latency", "missed_counts", "slow_drift"]
+#: Effects of their own cases (``--compliance``, ``--map``): drawn with the log's motion.
+MOTION_DRAWN = ["compliance_softening", "calibration_map"]
+#: Effects whose continuous parameters are checked against their 90 % intervals.
+COVERED = CONTINUOUS + ["compliance_softening"]
+
+
+def smooth_map(rng: np.random.Generator, lo: float, hi: float, peak_to_peak: float) -> dict:
+    """A smooth map outside the fitted spline family: three sines of the angle with wavelengths
+    of 1/5 to 2/3 of the stroke and random phases, constant and slope removed, as a dense
+    spline (a knot every 5 mrad) for :func:`simulate_log`."""
+    stroke = hi - lo
+    lam = rng.uniform(stroke / 5.0, stroke / 1.5, 3)
+    amp = rng.uniform(0.3, 1.0, 3)
+    ph = rng.uniform(0.0, 2.0 * np.pi, 3)
+    knots = np.linspace(lo, hi, max(int(stroke / 0.005), 8) + 1)
+    values = sum(a * np.sin(2.0 * np.pi * knots / w + p) for a, w, p in zip(amp, lam, ph))
+    values = values - np.polyval(np.polyfit(knots, values, 1), knots)
+    values = values * peak_to_peak / float(np.ptp(values))
+    return {"knots": [float(k) for k in knots], "values": [float(v) for v in values]}
+
+
+def motion_effect(name: str, rng: np.random.Generator, motion, t, map_shape: str = "spline") -> tuple[dict, dict]:
+    """Parameters of an effect drawn from the log's own motion, and the aux channels it needs.
+
+    ``compliance_softening``: the joint torque of the motion (:func:`random_torque`: inertia,
+    friction and gravity, peak 1-5 N m, logged with 0.5 % noise); a twist ``k1 T + k2 T|T|``
+    of 2-5 mrad at the peak torque before softening, softened by 25-50 % there (``k2`` of sign
+    opposite to ``k1``: a gear's play taken up gradually). ``calibration_map``: a smooth map
+    over the stroke (:func:`random_map`) of 1.5-4 mrad peak to peak with a bend every 1/4-1/8
+    of the stroke, its constant and slope removed (an offset and a scale, not a map); with
+    ``map_shape="smooth"`` a sum of sines of the angle instead (:func:`smooth_map`), which no
+    spline of the fitted family holds exactly.
+    """
+    if name == "compliance_softening":
+        peak = float(rng.uniform(1.0, 5.0))
+        torque = random_torque(rng, motion, t, peak)
+        k1 = float(rng.choice([-1.0, 1.0]) * rng.uniform(2e-3, 5e-3) / peak)
+        k2 = float(-k1 * rng.uniform(0.25, 0.5) / peak)
+        logged = torque + rng.normal(0.0, 0.005 * peak, t.size)
+        return {"k1": k1, "k2": k2}, {"torque": torque, "logged": {"torque": logged}}
+    if name == "calibration_map":
+        th = np.asarray(motion(t), dtype=float)
+        stroke = float(np.ptp(th))
+        if map_shape == "smooth":
+            return smooth_map(rng, float(th.min()), float(th.max()), float(rng.uniform(1.5e-3, 4e-3))), {}
+        m = random_map(rng, float(th.min()), float(th.max()), float(rng.uniform(1.5e-3, 4e-3)),
+                       stroke / float(rng.uniform(4.0, 8.0)))
+        return m, {}
+    raise ValueError(name)
 
 
 def _rotation(rng, duration):
@@ -141,7 +190,7 @@ def _rotation(rng, duration):
     return motion
 
 
-def _make_log(rng, names, scales, rotating=False, close=False):
+def _make_log(rng, names, scales, rotating=False, close=False, map_shape="spline"):
     duration = float(rng.uniform(10.0, 15.0))
     kind = str(rng.choice(["sine", "multisine", "smooth"]))
     amplitude = float(rng.uniform(0.5, 3.0))
@@ -160,7 +209,14 @@ def _make_log(rng, names, scales, rotating=False, close=False):
         amplitude = max(amplitude, 1.0)
         centre = float(np.pi - rng.uniform(0.2, 0.8) * amplitude) * rng.choice([-1.0, 1.0])
     motion = random_motion(rng, kind, duration, amplitude, centre)
-    eff = {n: nominal_effect(n, rng, scales.get(n, 1.0)) for n in names}
+    drawn = [n for n in names if n in MOTION_DRAWN]
+    eff = {n: nominal_effect(n, rng, scales.get(n, 1.0)) for n in names if n not in MOTION_DRAWN}
+    extra = {}
+    if drawn:
+        t = np.arange(int(round(duration * 1000.0))) / 1000.0
+        for n in drawn:
+            eff[n], more = motion_effect(n, rng, motion, t, map_shape)
+            extra.update(more)
     if "missed_counts" in eff:
         eff["missed_counts"]["times"] = [duration * x for x in eff["missed_counts"]["times"]]
         if close:
@@ -170,7 +226,9 @@ def _make_log(rng, names, scales, rotating=False, close=False):
             gaps = rng.uniform(0.1, 1.0 / (k - 1), k - 1)
             eff["missed_counts"] = {"times": list(t0 + np.concatenate(([0.0], np.cumsum(gaps)))),
                                     "jumps": [int(rng.choice([-1, 1]) * rng.integers(1, 3)) for _ in range(k)]}
-    log = simulate_log(rng, motion, duration=duration, step=STEP, truth_step=TRUTH_STEP, effects=eff)
+    log = simulate_log(rng, motion, duration=duration, step=STEP, truth_step=TRUTH_STEP, effects=eff,
+                       torque=extra.get("torque"))
+    log["aux"] = extra.get("logged", {})
     return log, eff, {"duration": duration, "motion": kind, "amplitude": amplitude}
 
 
@@ -273,24 +331,26 @@ def _challenge_job(args):
         scales = {name: 3.0 * thr}
     rng = np.random.default_rng(seed)
     rotating = kind == "rotating"
-    log, eff, meta = _make_log(rng, list(names), scales, rotating=rotating, close=kind == "missed_close")
+    log, eff, meta = _make_log(rng, list(names), scales, rotating=rotating, close=kind == "missed_close",
+                               map_shape="smooth" if kind == "map_smooth" else "spline")
     t0 = time.perf_counter()
     # a rotating axis's truth is a float channel: its grid (the floor) is the selection's to find
+    aux = log.get("aux") or None
     res = select_effects(log["t"], log["truth"], log["measured"], STEP, truth_step=None if rotating else TRUTH_STEP,
-                         line_pitch=LINE_PITCH)
+                         line_pitch=LINE_PITCH, aux=aux)
     wall = time.perf_counter() - t0
     chosen = [e.name for e in res.effects]
     alts = [(e.name, [a["name"] for a in e.indistinguishable]) for e in res.effects]
     cover = {}
     for e in res.effects:
-        if e.name in eff and e.name in CONTINUOUS:
+        if e.name in eff and e.name in COVERED:
             for p, (lo, hi) in e.ci.items():
                 true = eff[e.name][p]
                 cover[f"{e.name}.{p}"] = bool(lo <= true <= hi)
     ratio = res.after["std"] / res.after["floor_std"] if res.after["floor_std"] > 0 else float("inf")
     found = _found_true(res, eff, names, float(log["t"][-1] - log["t"][0]))
     r_after = log["measured"] - res.model_prediction()
-    ranking = dg.rank_covariates(r_after, dg.covariates_of(log["t"], log["truth"]))
+    ranking = dg.rank_covariates(r_after, dg.covariates_of(log["t"], log["truth"], aux))
     top = ranking[0] if ranking else {"name": "", "share": float("nan")}
     # every candidate's delta BIC against the base model (the first round of the selection):
     # tells a miss where the true effect was below the criterion from one where another won
@@ -319,6 +379,8 @@ def _challenge_job(args):
         # covariate ranking points at the covariate of the true effect's signature
         "named": bool(_matches(alts, names) or (not res.explained and names
                                                 and top["name"] == SIGNATURE_COVARIATE.get(names[0]))),
+        # named by the effect itself (or an alternative the report names as not distinguishable)
+        "named_effect": bool(names) and bool(_matches(alts, names)),
         "merged": json.dumps({e.name: e.merged_with for e in res.effects if e.merged_with}),
         "coverage": json.dumps(cover),
         "true_params": json.dumps({k: {kk: (vv if not isinstance(vv, list) else vv) for kk, vv in v.items()} for k, v in eff.items()}),
@@ -341,7 +403,8 @@ def _challenge_job(args):
 #: The covariate a residual of each effect follows when the effect is not modelled.
 SIGNATURE_COVARIATE = {"slow_drift": "time", "missed_counts": "time", "angle_harmonics": "angle",
                        "scale_mismatch": "angle", "latency": "velocity", "hysteresis": "direction",
-                       "backlash": "direction"}
+                       "backlash": "direction", "compliance_softening": "torque",
+                       "calibration_map": "angle"}
 
 
 def _found_true(res, eff, names, t_span: float) -> bool:
@@ -360,6 +423,9 @@ def _found_true(res, eff, names, t_span: float) -> bool:
                    for j in range(k))
     if e.name == "wrap_around":
         return e.params["period"] == true["period"]
+    if e.name == "calibration_map":
+        # the simulated map is no member of the fitted spline basis: no true coefficients
+        return False
     if e.name == "slow_drift":
         # the simulated drift is rate * (t - t_mid): c1 = rate T / 2, c2 = c3 = 0
         half = 0.5 * t_span
@@ -448,6 +514,8 @@ def summarize(df: pd.DataFrame) -> pd.DataFrame:
             "explained_given_found": (float(g.loc[g["found_true"].astype(bool), "explained"].astype(bool).mean())
                                       if g["found_true"].astype(bool).any() else float("nan")),
             "named_rate": float(g["named"].astype(bool).mean()),
+            "named_effect_rate": float(g["named_effect"].astype(bool).mean()),
+            "named_effect_ci90": _rate(int(g["named_effect"].astype(bool).sum()), n)[1],
             "wall_s_median": g["wall_s"].median(),
         }
         rows.append(row)
@@ -501,6 +569,52 @@ def scaling(sizes=(10_000, 100_000, 1_000_000), seed=7) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def floor_calibration(n_logs: int, seed: int) -> pd.DataFrame:
+    """Calibration of the exact-model floor on clean logs like the embedded ``res_clean_r01``.
+
+    A 4000-cpr motor encoder through a 23:1 gear (truth) and an 8192-cpr output encoder, a
+    20 deg sine for 6 s at 1 kHz, the base model only (no effect). Two motions: 1 Hz, which
+    passes the same 1000 angles six times, and 1.137 Hz, which does not. Per log: the residual
+    std over the floor, whether it lies outside the floor's 90 % interval and above the verdict's
+    limit, with the interval's standard error from time blocks alone and from the larger of
+    time blocks and angle bins (the library's).
+    """
+    from enclab.core.quantize import quantize
+
+    ts, st = 2 * np.pi / (4000 * 23), 2 * np.pi / 8192
+    t = np.arange(6000) / 1000.0
+    rows = []
+    for freq in (1.0, 1.137):
+        for i, s in enumerate(np.random.SeedSequence(seed).spawn(n_logs)):
+            rng = np.random.default_rng(s)
+            theta = (np.deg2rad(20.0) * np.sin(2 * np.pi * freq * t + rng.uniform(0, 2 * np.pi))
+                     + rng.uniform(0, st) + rng.normal(0, 1e-6, t.size))
+            truth = quantize(theta, ts) * ts
+            ctx = sel._make_ctx(t, truth, quantize(theta, st, 0.0), st, ts, {}, 0.0, None)
+            model = sel._Model([])
+            x, ll = sel._fit(model, ctx, sel._base_start(ctx))
+            fitted = sel._Fitted(model, x, ll)
+            lib = sel.residual_stats(fitted, ctx)
+            # the time-block standard error alone, from the same squared residuals
+            floor_var = lib["floor_std"] ** 2
+            mu, _ = model.forward(ctx, x)
+            r = st * (ctx.counts - np.floor(mu))
+            se_lib = (lib["floor_limit"] ** 2 - floor_var) / sel._T99_BLOCKS
+            half = 0.5 * ts / st
+            js = np.arange(-3, 4)  # the reach of residual_stats at this truth step
+            P = sel._floor_probs(mu, half, np.full(mu.size, 1e-9), js)
+            er2 = st**2 * ((js[:, None] ** 2) * P).sum(axis=0)
+            se_time = sel._block_se(r**2 - er2, np.array_split(np.arange(r.size), sel._FLOOR_BLOCKS))
+            var = r.var()
+            for label, se in (("time blocks", se_time), ("time blocks and angle bins", se_lib)):
+                lo, hi = max(floor_var - sel._Z90 * se, 0.0), floor_var + sel._Z90 * se
+                rows.append({"freq_hz": freq, "log": i, "interval_from": label,
+                             "after_over_floor": math.sqrt(var / floor_var),
+                             "outside_ci90": bool(var < lo or var > hi),
+                             "above_limit": bool(var > floor_var + sel._T99_BLOCKS * se)})
+    return pd.DataFrame(rows)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--per-effect", type=int, default=40)
@@ -515,11 +629,18 @@ def main(argv=None):
     ap.add_argument("--missed-close", type=int, default=10,
                     help="logs with 2-4 missed counts within about a second of each other")
     ap.add_argument("--rotating", type=int, default=10, help="logs per effect on a rotating axis (float truth)")
+    ap.add_argument("--compliance", type=int, default=40,
+                    help="logs with an undeclared softening compliance against a logged torque")
+    ap.add_argument("--map", type=int, default=40, help="logs with an undeclared smooth calibration map")
+    ap.add_argument("--map-smooth", type=int, default=0,
+                    help="logs with an undeclared map that is a sum of sines of the angle (outside the spline family)")
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--seed", type=int, default=20261128)
     ap.add_argument("--out", default="results/benchmarks")
     ap.add_argument("--scaling", action="store_true", help="only time one selection at 1e4, 1e5, 1e6 samples")
     ap.add_argument("--replot", action="store_true", help="only redraw the PNG from the summary CSV in --out")
+    ap.add_argument("--floor", type=int, default=0,
+                    help="only the floor calibration on this many clean res_clean-like logs per motion")
     args = ap.parse_args(argv)
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -529,6 +650,15 @@ def main(argv=None):
         return
     if args.scaling:
         scaling().to_csv(out / "challenge_residuals_scaling.csv", index=False)
+        return
+    if args.floor:
+        fl = floor_calibration(args.floor, args.seed)
+        stamp(fl).to_csv(out / "challenge_residuals_floor.csv", index=False)
+        summ = fl.groupby(["freq_hz", "interval_from"]).agg(
+            n=("log", "size"), ratio_mean=("after_over_floor", "mean"), ratio_sd=("after_over_floor", "std"),
+            outside_ci90=("outside_ci90", "mean"), above_limit=("above_limit", "mean")).reset_index()
+        stamp(summ).to_csv(out / "challenge_residuals_floor_summary.csv", index=False)
+        print(summ.round(3).to_string(index=False))
         return
     ss = np.random.SeedSequence(args.seed)
     seeds = iter(int(s.generate_state(1)[0]) for s in ss.spawn(100000))
@@ -555,6 +685,9 @@ def main(argv=None):
     jobs += [("missed_close", ("missed_counts",), {}, next(seeds)) for _ in range(args.missed_close)]
     for n in ROTATING:
         jobs += [("rotating", (n,), scales, next(seeds)) for _ in range(args.rotating)]
+    jobs += [("compliance", ("compliance_softening",), {}, next(seeds)) for _ in range(args.compliance)]
+    jobs += [("map", ("calibration_map",), {}, next(seeds)) for _ in range(args.map)]
+    jobs += [("map_smooth", ("calibration_map",), {}, next(seeds)) for _ in range(args.map_smooth)]
     df = pd.DataFrame(_map(_challenge_job, jobs, args.jobs))
     df["skipped"] = df["skipped"].astype(bool)
     summary = summarize(df)
@@ -602,10 +735,14 @@ def main(argv=None):
     print(rate_line("clean logs with no effect", len(clean) - kf, len(clean)))
     for kind, label in (("drift", "slow drift (undeclared) named by the effect or the covariate ranking"),
                         ("missed_close", "missed counts close together: the exact set"),
-                        ("rotating", "rotating axes (float truth): the exact set or a named alternative")):
+                        ("rotating", "rotating axes (float truth): the exact set or a named alternative"),
+                        ("compliance", "softening compliance (undeclared) named by the effect"),
+                        ("map", "smooth calibration map (undeclared) named by the effect"),
+                        ("map_smooth", "map as a sum of sines of the angle (undeclared) named by the effect")):
         g = ran[ran["kind"] == kind]
         if len(g):
-            col = "named" if kind == "drift" else ("exact" if kind == "missed_close" else "exact_or_indist")
+            col = {"drift": "named", "missed_close": "exact", "compliance": "named_effect",
+                   "map": "named_effect", "map_smooth": "named_effect"}.get(kind, "exact_or_indist")
             print(rate_line(label, int(g[col].astype(bool).sum()), len(g)))
     found = ran[ran["found_true"].astype(bool)]
     print(rate_line("one true effect found with its true value -> explained", int(found["explained"].astype(bool).sum()),

@@ -10,10 +10,11 @@ from __future__ import annotations
 
 
 import numpy as np
+from scipy.interpolate import CubicSpline
 
 from enclab.residuals import effects as fx
 
-__all__ = ["random_motion", "simulate_log"]
+__all__ = ["random_motion", "random_torque", "random_map", "simulate_log"]
 
 
 def random_motion(rng: np.random.Generator, kind: str, duration: float, amplitude: float, centre: float = 0.0):
@@ -43,6 +44,44 @@ def random_motion(rng: np.random.Generator, kind: str, duration: float, amplitud
     raise ValueError(f"unknown motion kind {kind!r}; use 'sine', 'multisine' or 'smooth'")
 
 
+def random_torque(rng: np.random.Generator, motion, t, peak: float):
+    """Joint torque (N m) of a motion: inertia, viscous and Coulomb friction and gravity.
+
+    ``T = J a + b v + T_c tanh(v / 0.05) + T_g sin(theta)`` with the velocity and acceleration of
+    ``motion`` (central differences of the callable, 0.1 ms), random positive ``J, b, T_c, T_g``
+    of comparable shares, scaled to a largest ``|T|`` of ``peak``.
+    """
+    t = np.asarray(t, dtype=float)
+    h = 1e-4
+    th = np.asarray(motion(t), dtype=float)
+    v = (np.asarray(motion(t + h)) - np.asarray(motion(t - h))) / (2 * h)
+    a = (np.asarray(motion(t + h)) - 2 * th + np.asarray(motion(t - h))) / (h * h)
+    parts = [a, v, np.tanh(v / 0.05), np.sin(th)]
+    w = rng.uniform(0.2, 1.0, len(parts))
+    tq = sum(wi * p / max(float(np.max(np.abs(p))), 1e-12) for wi, p in zip(w, parts))
+    return peak * tq / float(np.max(np.abs(tq)))
+
+
+def random_map(rng: np.random.Generator, lo: float, hi: float, peak_to_peak: float, spacing: float):
+    """A smooth calibration map over ``[lo, hi]``: ``{knots, values}`` for :func:`simulate_log`.
+
+    Random values at knots about ``spacing`` apart (a not-a-knot cubic spline through them),
+    their least-squares constant and slope over a uniform grid of ``[lo, hi]`` removed (those
+    are a quantizer offset and a scale mismatch, not a map), scaled to ``peak_to_peak`` (rad).
+    """
+    n = max(int(np.ceil((hi - lo) / spacing)), 3)
+    knots = np.linspace(lo, hi, n + 1)
+    values = rng.normal(0.0, 1.0, knots.size)
+    grid = np.linspace(lo, hi, 2001)
+    curve = CubicSpline(knots, values)(grid)
+    A = np.column_stack([np.ones_like(grid), grid])
+    coef, *_ = np.linalg.lstsq(A, curve, rcond=None)
+    # a spline through (values - line at the knots) is the spline minus the line: exact removal
+    values = values - (coef[0] + coef[1] * knots)
+    scale = peak_to_peak / float(np.ptp(CubicSpline(knots, values)(grid)))
+    return {"knots": [float(k) for k in knots], "values": [float(v) * scale for v in values]}
+
+
 def simulate_log(
     rng: np.random.Generator,
     motion,
@@ -60,7 +99,10 @@ def simulate_log(
     Supported names and parameters (SI): ``hysteresis {h}``, ``backlash {w}``,
     ``angle_harmonics {a1, b1, a2, b2}``, ``line_pitch_harmonics {a, b, pitch}``,
     ``quadrature_edges {e0, e1, e2}``, ``latency {tau}``, ``timestamp_jitter {sigma_t}``,
-    ``scale_mismatch {g}``, ``compliance {kappa}`` (needs ``torque``), ``slow_drift {rate, quad}``
+    ``scale_mismatch {g}``, ``compliance {kappa}`` and ``compliance_softening {k1, k2}``
+    (``k1 T + k2 T|T|``; both need ``torque``, the true torque, which the effect follows),
+    ``calibration_map {knots, values}`` (a not-a-knot cubic spline through ``values`` at the
+    angles ``knots``, held at its end values outside them), ``slow_drift {rate, quad}``
     (``rate (t - t_mid) + quad (t - t_mid)^2``, rad/s and rad/s^2), ``missed_counts {times,
     jumps}``, ``wrap_around {period}``.
 
@@ -90,11 +132,20 @@ def simulate_log(
     if "compliance" in effects:
         tq = np.asarray(torque, dtype=float)
         te = te + effects["compliance"]["kappa"] * (tq - tq.mean())
+    if "compliance_softening" in effects:
+        tq = np.asarray(torque, dtype=float)
+        p = effects["compliance_softening"]
+        te = te + p["k1"] * tq + p["k2"] * tq * np.abs(tq)
     if "scale_mismatch" in effects:
         te = te + effects["scale_mismatch"]["g"] * (te - truth.mean())
     if "angle_harmonics" in effects:
         p = effects["angle_harmonics"]
         te = te + p.get("a1", 0) * np.cos(te) + p.get("b1", 0) * np.sin(te) + p.get("a2", 0) * np.cos(2 * te) + p.get("b2", 0) * np.sin(2 * te)
+    if "calibration_map" in effects:
+        p = effects["calibration_map"]
+        knots = np.asarray(p["knots"], dtype=float)
+        spline = CubicSpline(knots, np.asarray(p["values"], dtype=float))
+        te = te + spline(np.clip(te, knots[0], knots[-1]))
     if "line_pitch_harmonics" in effects:
         p = effects["line_pitch_harmonics"]
         w = 2 * np.pi * te / p.get("pitch", 4 * step)
