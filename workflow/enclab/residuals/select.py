@@ -740,7 +740,8 @@ def residual_stats(fitted: _Fitted, ctx) -> dict:
     P = _floor_probs(mu, half, sigma, js)
     er = ctx.step * (js[:, None] * P).sum(axis=0)
     er2 = ctx.step**2 * ((js[:, None] ** 2) * P).sum(axis=0)
-    floor_var = float(er2.mean() - er.mean() ** 2)
+    # a variance: rounding can take a floor of zero a hair below it
+    floor_var = max(float(er2.mean() - er.mean() ** 2), 0.0)
     var = float(r.var())
     d = r**2 - er2
     se = max(_block_se(d, np.array_split(np.arange(d.size), _FLOOR_BLOCKS)),
