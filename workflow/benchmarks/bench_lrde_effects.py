@@ -272,8 +272,10 @@ def main(argv=None):
     for cycles in args.cycles:
         n_max = max(args.draws, args.clean_draws)
         for i in range(args.first_draw, n_max):
-            for c_i, case in enumerate(args.cases):
+            for case in args.cases:
                 n_case = args.clean_draws if case == "clean" else args.draws
+                # A case's seeds do not depend on which other cases run beside it.
+                c_i = CASES.index(case)
                 if i < n_case:
                     tasks.append((case, cycles, args.seed + 100_000 * c_i + 1000 * cycles + i))
     started = time.perf_counter()
