@@ -334,8 +334,9 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
     two are equivalent to first order. So every other candidate that predicts each fold
     better than the sinusoid and whose held-out score lies within two standard errors (paired
     per-cycle differences) of the pick's is listed in ``indistinguishable``, whether or not
-    it cleared the bar against the sinusoid itself; its ``delta_over_chosen`` and
-    ``se_over_chosen`` hold that evidence.
+    it cleared the bar against the sinusoid itself (a model holding the pick's terms and more
+    is not an alternative to it); its ``delta_over_chosen`` and ``se_over_chosen`` hold that
+    evidence.
 
     The chosen model is then checked (:func:`predictive_check`): its log-likelihood at the
     full-log point fit against the distribution of the same score on ``n_sim`` readings
@@ -456,14 +457,18 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
                 if gain > 0 and entry["delta_bic"] > best["delta_bic"]:
                     best = entry
     best_res = results[best["label"]][1]
+    best_terms = set(best["label"].split("+"))
     indistinguishable = []
     for m in models:
         # An alternative explanation: it predicts each fold better than the sinusoid too,
         # and its held-out score is within two standard errors of the pick's. Whether it
         # also cleared the bar against the sinusoid does not matter here: near the detection
-        # limit the pick clears it by luck as much as by its own signature.
+        # limit the pick clears it by luck as much as by its own signature. A model holding
+        # the pick's terms and more is no alternative: scoring like the pick only says that
+        # its extra term is not needed.
         if (best["label"] == "sinusoid" or m is best or m["label"] == "sinusoid"
-                or min(m["delta_elpd_halves"]) <= 0):
+                or min(m["delta_elpd_halves"]) <= 0
+                or best_terms < set(m["label"].split("+"))):
             continue
         delta, se, _, _ = score(best_res, results[m["label"]][1])
         m["delta_over_chosen"] = -delta
