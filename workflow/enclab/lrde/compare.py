@@ -331,7 +331,10 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
     falling edges of one level in opposite directions, the band by ``w/2`` at every level,
     the harmonic's ``cos 3 phi`` part by an amount that varies with the level, and the
     fundamental's phase absorbs the common part; on a symmetric three-level pattern the
-    two are equivalent to first order. So every other candidate that predicts each fold
+    two are equivalent to first order. Against the sinusoid alone a narrow band is mostly a
+    phase lag: what the sinusoid cannot absorb is the band's constant shift against the
+    lag's ``cos phi`` profile over the levels, a few percent of ``w/2`` unless the pattern
+    is lopsided or a level grazes a turning point. So every other candidate that predicts each fold
     better than the sinusoid and whose held-out score lies within two standard errors (paired
     per-cycle differences) of the pick's is listed in ``indistinguishable``, whether or not
     it cleared the bar against the sinusoid itself (a model holding the pick's terms and more
