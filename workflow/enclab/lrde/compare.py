@@ -333,7 +333,7 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
     fundamental's phase absorbs the common part; on a symmetric three-level pattern the
     two are equivalent to first order. Against the sinusoid alone a narrow band is mostly a
     phase lag: what the sinusoid cannot absorb is the band's constant shift against the
-    lag's ``cos phi`` profile over the levels, a few percent of ``w/2`` unless the pattern
+    lag's ``cos phi`` profile over the levels, a tenth of ``w/2`` or less unless the pattern
     is lopsided or a level grazes a turning point. So every other candidate that predicts each fold
     better than the sinusoid and whose held-out score lies within two standard errors (paired
     per-cycle differences) of the pick's is listed in ``indistinguishable``, whether or not
