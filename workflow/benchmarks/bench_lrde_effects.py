@@ -245,6 +245,9 @@ def main(argv=None):
     ap.add_argument("--n-walkers", type=int, default=16)
     ap.add_argument("--n-steps", type=int, default=250)
     ap.add_argument("--n-burn", type=int, default=100)
+    ap.add_argument("--max-steps", type=int, default=1000,
+                    help="as the stage: unconverged chains go on in blocks of --n-steps up "
+                         "to this")
     ap.add_argument("--time-budget", type=float, default=None,
                     help="stop drawing after this many seconds (rows so far are kept)")
     ap.add_argument("--out", default=str(ROOT / "results" / "benchmarks"))
@@ -264,7 +267,7 @@ def main(argv=None):
             print(summary)
         return
     sampler = {"n_ensembles": args.n_ensembles, "n_walkers": args.n_walkers,
-               "n_steps": args.n_steps, "n_burn": args.n_burn}
+               "n_steps": args.n_steps, "n_burn": args.n_burn, "max_steps": args.max_steps}
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     # Interleave cases so that a time budget cuts every case to about the same size.
