@@ -3,6 +3,7 @@ import zlib
 
 from enclab.core import atomic, canonical
 from enclab.lrde.pipeline import analyse_lrde_log
+from enclab.reference_effects import references_by_channel
 from enclab.runner import run
 
 
@@ -11,7 +12,9 @@ def main(smk):
     settings = dict(smk.params.settings)
     # One stream per log, reproducible from the configured seed whatever the job order.
     seed = [int(settings.pop("seed", 0)), zlib.crc32(meta["log_id"].encode())]
-    block, figures, report_md, cycles = analyse_lrde_log(df, meta, seed, settings)
+    references = references_by_channel(atomic.read_json(p) for p in smk.input.residuals)
+    block, figures, report_md, cycles = analyse_lrde_log(df, meta, seed, settings,
+                                                         references=references)
     block["seed"] = seed
     atomic.write_table(cycles, smk.output.cycles)
     atomic.save_figure(figures["corner"], smk.output.corner)

@@ -153,3 +153,19 @@ def test_effect_names_are_checked():
     with pytest.raises(ValueError, match="effects"):
         effects.check_effects(("backlash",))
     assert effects.check_effects(("time_jitter", "hysteresis")) == ("hysteresis", "time_jitter")
+
+
+def test_sparse_interval_log_probability_matches_the_exact_form_in_every_regime():
+    # Bounds across both tails and widths from 1e-3 to 30 standard deviations: the skipped
+    # entries are those with both bounds beyond 8 (value above -1.3e-15), the others agree
+    # with the reflected two-bound form to rounding.
+    rng = np.random.default_rng(11)
+    lower = rng.uniform(-40.0, 40.0, (64, 400))
+    width = 10.0 ** rng.uniform(-3.0, 1.5, lower.shape)
+    upper = lower + width
+    keep, vals = effects._log_interval_sparse(lower, upper)
+    exact = effects._log_interval(lower, upper).ravel()
+    skipped = np.setdiff1d(np.arange(lower.size), keep)
+    assert np.all(lower.ravel()[skipped] < -8) and np.all(upper.ravel()[skipped] > 8)
+    assert np.all(exact[skipped] > -1.3e-15)
+    np.testing.assert_allclose(vals, exact[keep], rtol=1e-9, atol=1e-14)

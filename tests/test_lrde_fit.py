@@ -234,3 +234,39 @@ def test_chains_go_on_until_converged_up_to_max_steps():
     np.testing.assert_array_equal(longer.chains[:, :50], short.chains)
     with pytest.raises(ValueError, match="max_steps"):
         fit.fit_sinusoid(t, c, STEP, seed=5, max_steps=40, **kwargs)
+
+
+def test_before_and_after_fits_side_by_side_equal_the_sequential_ones():
+    """The pipeline's two emcee fits in a forked worker give the same chains as in turn."""
+    from enclab.lrde import pipeline
+
+    df, _ = _log(23, n_cycles=4)
+    t, c = df["t"].to_numpy(), df["counts"].to_numpy()
+    small = {"n_ensembles": 2, "n_walkers": 16, "n_steps": 50, "n_burn": 10}
+    rich = dict(small, harmonics=(3,), effects=("hysteresis",))
+    # Fresh seed sequences per run: spawning children advances a SeedSequence.
+    one = pipeline._run_fits(t, c, STEP, (np.random.SeedSequence(1), small),
+                             (np.random.SeedSequence(2), rich), threads=1)
+    two = pipeline._run_fits(t, c, STEP, (np.random.SeedSequence(1), small),
+                             (np.random.SeedSequence(2), rich), threads=2)
+    for a, b in zip(one, two):
+        np.testing.assert_array_equal(a.chains, b.chains)
+        assert a.summary == b.summary and a.param_names == b.param_names
+    assert one[1].param_names[-1] == "hysteresis"
+
+
+@pytest.mark.parametrize("amplitude_steps", [0.0, 0.3, 2.7, 40.0, 310.0])
+def test_truth_rounding_bound_holds_the_phase_averaged_error_for_every_bias(amplitude_steps):
+    """Brute force: the rounding error of b + A sin(phi), averaged over a fine phase grid, for
+    biases across one step, never exceeds the bound, which is also at most half a step and
+    not needlessly wide (within 3x of the worst bias's error: the sum of |terms| against the
+    sum of terms of one phase)."""
+    s = 1.0
+    phi = np.linspace(0.0, 2.0 * np.pi, 100_000, endpoint=False)
+    worst = 0.0
+    for b in np.linspace(0.0, 1.0, 101):
+        theta = b + amplitude_steps * np.sin(phi)
+        worst = max(worst, abs(np.mean(s * np.round(theta / s) - theta)))
+    bound = fit.truth_rounding_bound(amplitude_steps, s)
+    assert worst <= bound <= 0.5 * s
+    assert bound <= 3.0 * worst

@@ -205,3 +205,82 @@ def test_hysteresis_with_a_truth_channel_is_named_and_a_b_hold_after():
         assert block["after"][key]["q05"] < true < block["after"][key]["q95"], key
     assert block["before"]["model"] == "sinusoid" and block["after"]["model"] == "hysteresis"
     assert "before (sinusoid)" in md and "after (hysteresis)" in md
+
+
+def _hysteresis_log(seed, width, n_cycles=40):
+    from enclab.lrde import effects
+
+    rng = np.random.default_rng(seed)
+    f_hz, a, b, A12, phase = 20.3, 0.3 * STEP, 0.22 * STEP, 3.7 * STEP, 0.4
+    t = np.arange(int(n_cycles * 2000.0 / f_hz)) / 2000.0
+    counts = effects.simulate_counts(rng, t, STEP, A12, a + b, f_hz, phase,
+                                     noise_std=0.005 * STEP, hysteresis=width)
+    theta = b + 0.5 * A12 * np.sin(2 * np.pi * f_hz * t + phase)
+    df = pd.DataFrame({"t": t, "coarse": counts,
+                       "fine": np.floor(theta / (STEP / 100) + 0.5).astype(np.int64)})
+    meta = {"log_id": "sim_hysteresis", "channels": [
+        {"name": "fine", "role": "truth", "joint": 1, "unit": "rad", "storage": "counts",
+         "step": STEP / 100},
+        {"name": "coarse", "role": "measured", "joint": 1, "unit": "rad", "storage": "counts",
+         "step": STEP}]}
+    return df, meta, {"offset_a": a, "bias_b": b, "A12": A12}
+
+
+def test_reference_terms_are_confirmed_or_named_as_standing_for_the_motion():
+    model_block = {"effects": ["hysteresis", "drift"],
+                   "params": {"hysteresis": {"median": 2e-4, "q05": 1.8e-4, "q95": 2.2e-4}}}
+    found = {"truth": "fine", "explained": True, "effects": ["hysteresis"],
+             "found": [{"term": "hysteresis", "residual_effect": "backlash", "value": 2.1e-4,
+                        "ci": [2.05e-4, 2.15e-4]}], "not_modelled": []}
+    ref = report.reference_block(found, model_block, added=[])
+    assert [(r["term"], r["status"], r["consistent"]) for r in ref["terms"]] == [
+        ("hysteresis", "found by both", True)]
+    far = dict(found, found=[dict(found["found"][0], value=9e-4, ci=[8.9e-4, 9.1e-4])])
+    assert report.reference_block(far, model_block, added=[])["terms"][0]["consistent"] is False
+    clean = dict(found, effects=[], found=[])
+    row = report.reference_block(clean, model_block, added=[])["terms"][0]
+    assert row["status"] == "not confirmed by the truth channel" and "motion" in row["note"]
+    assert report.reference_block(None, model_block, added=[]) is None
+
+
+def test_an_effect_the_model_cannot_hold_flags_the_estimates_it_biases():
+    from types import SimpleNamespace
+
+    fit_stub = SimpleNamespace(converged=True, summary={k: {"median": 0.0} for k in
+                                                        ("A12", "E_b", "a_eq", "f_hz",
+                                                         "offset_a", "bias_b")})
+    drift = {"residual_effect": "slow_drift", "why": "a_eq is constant",
+             "biases": ["a_eq", "E_b", "offset_a"]}
+    block = {"check": {}, "reference": {"truth": "fine", "explained": True,
+                                        "not_modelled": [drift]}}
+    trust = report.trust_block(fit_stub, block)
+    assert [k for k, v in trust.items() if not v["trusted"]] == ["E_b", "a_eq", "offset_a"]
+    assert "slow_drift" in trust["a_eq"]["reason"]
+    block["reference"] = {"truth": "fine", "explained": False, "not_modelled": []}
+    assert not any(v["trusted"] for v in report.trust_block(fit_stub, block).values())
+    assert all(v["trusted"] for v in report.trust_block(fit_stub, {"check": {}}).values())
+
+
+@pytest.mark.slow
+def test_an_effect_found_against_the_truth_channel_enters_the_fit():
+    """The readings alone are not compared (no candidate), but the residual stage found a
+    dead band of 1/8 step against the truth channel: the fit adds it, and a, b hold after."""
+    df, meta, true = _hysteresis_log(31, STEP / 8)
+    reference = {"channel": "coarse", "truth": "fine", "explained": True,
+                 "effects": ["hysteresis"],
+                 "found": [{"term": "hysteresis", "residual_effect": "backlash",
+                            "value": STEP / 8, "ci": [0.98 * STEP / 8, 1.02 * STEP / 8]}],
+                 "not_modelled": [{"residual_effect": "latency", "why": "phase only",
+                                   "biases": []}]}
+    settings = dict(FAST, motion_models=[[]], effects=[], n_steps=150, n_burn=60)
+    block, _, md, _ = pipeline.analyse_lrde_log(df, meta, seed=3, settings=settings,
+                                                references={"coarse": reference})
+    assert block["model"]["effects"] == ["hysteresis"]
+    assert block["before"]["model"] == "sinusoid" and block["after"]["model"] == "hysteresis"
+    row = block["model"]["reference"]["terms"][0]
+    assert row["status"] == "added from the truth channel" and row["consistent"]
+    for key, value in true.items():
+        assert block["after"][key]["q05"] < value < block["after"][key]["q95"], key
+    assert "Added to the fit from its findings: hysteresis" in md
+    assert "latency (truth channel): no term here" in md
+    json.dumps(block)

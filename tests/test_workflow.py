@@ -67,6 +67,11 @@ def test_lrde_log_reports_offset_and_bias(default_run):
     assert block["A12"]["median"] == pytest.approx(params["A12"], rel=0.03)
     assert block["offset_a"]["median"] == pytest.approx(params["offset_a"],
                                                         abs=0.1 * params["step"])
+    # The residual stage of the same log (coarse against fine) reached the fit: a clean
+    # encoder, so nothing was added and no term of the fit lacks its confirmation.
+    reference = block["model"]["reference"]
+    assert reference["truth"] == "fine" and reference["added"] == []
+    assert all(r["status"] != "added from the truth channel" for r in reference["terms"])
     table = pd.read_csv(work / "results/batch/lrde.csv")
     assert set(table["log_id"]) == {"lrde"} and "A12" in set(table["quantity"])
     assert (work / "results/lrde/lrde/report.md").read_text().startswith("# Low-resolution")

@@ -3,19 +3,22 @@
 Every log of the manifest whose ``analysis.stages`` holds ``lrde`` is ingested and run through
 :func:`enclab.lrde.pipeline.analyse_lrde_log` with ``config.yaml``'s ``lrde`` settings (and
 the log's own ``analysis.lrde``), as the ``lrde_fit`` rule does, ``--repeats`` times; the
-chosen model and the trust flags are recorded with the time.
+chosen model, the trust flags and a digest of the block are recorded with the time.
 
 Usage::
 
     python workflow/benchmarks/bench_lrde_stage.py --repeats 3
     PYTHONPATH=<other checkout>/workflow python workflow/benchmarks/bench_lrde_stage.py \\
         --label other   # the same logs with another version of the package
+    python workflow/benchmarks/bench_lrde_stage.py --threads 2 --logs lrde_closed_r01
 
 Writes ``<out>/lrde_stage.csv`` (appends rows).
 """
 from __future__ import annotations
 
 import argparse
+import hashlib
+import json
 import pathlib
 import sys
 import time
@@ -35,6 +38,9 @@ def main(argv=None) -> None:
     ap.add_argument("--repeats", type=int, default=1)
     ap.add_argument("--label", default="this")
     ap.add_argument("--out", default=str(ROOT / "results" / "benchmarks"))
+    ap.add_argument("--threads", type=int, default=1,
+                    help="processes for the before and after fits (analyse_lrde_log threads)")
+    ap.add_argument("--logs", nargs="*", default=None, help="only these log ids")
     args = ap.parse_args(argv)
     import enclab
     from enclab.core import ingest, readers
@@ -47,23 +53,31 @@ def main(argv=None) -> None:
     for entry in entries:
         if "lrde" not in ((entry.get("analysis") or {}).get("stages") or []):
             continue
+        if args.logs is not None and entry["id"] not in args.logs:
+            continue
         df, meta = ingest.ingest_log(entry, data_root, devices)
         settings = dict(config.get("lrde") or {})
         settings.update((entry.get("analysis") or {}).get("lrde") or {})
         seed = [int(settings.pop("seed", 0)), zlib.crc32(meta["log_id"].encode())]
         for r in range(args.repeats):
             started = time.perf_counter()
-            block, figures, _, _ = analyse_lrde_log(df, meta, seed, settings)
+            # Older versions of the package have no threads argument.
+            extra = {} if args.threads == 1 else {"threads": args.threads}
+            block, figures, _, _ = analyse_lrde_log(df, meta, seed, settings, **extra)
             wall = time.perf_counter() - started
             for fig in figures.values():
                 fig.clear()
             model = (block.get("model") or {}).get("chosen")
             trust = block.get("trust") or {}
             rows.append({"label": args.label, "package": str(pathlib.Path(enclab.__file__).parent),
-                         "log_id": meta["log_id"], "samples": len(df), "repeat": r,
+                         "log_id": meta["log_id"], "samples": len(df), "threads": args.threads, "repeat": r,
                          "wall_s": wall, "model": model,
                          "A12_trusted": (trust.get("A12") or {}).get("trusted"),
-                         "converged": block["diagnostics"]["converged"]})
+                         "converged": block["diagnostics"]["converged"],
+                         # Same digest across repeats and thread counts: the block (and so
+                         # summary.json) does not depend on timing or on the process layout.
+                         "block_sha256": hashlib.sha256(json.dumps(
+                             block, sort_keys=True, default=str).encode()).hexdigest()[:16]})
             print(rows[-1], flush=True)
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

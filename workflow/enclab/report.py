@@ -82,7 +82,10 @@ def _lrde(summaries: Sequence[Mapping]) -> dict | None:
         row = {"log_id": s["log_id"], "converged": diag.get("converged"),
                "rhat_max": _num(diag.get("rhat_max")), "ess_min": _num(diag.get("ess_min")),
                "reason": block.get("reason"),
-               "model": (block.get("model") or {}).get("chosen"),
+               "model": (block.get("after") or {}).get("model")
+               or (block.get("model") or {}).get("chosen"),
+               "added_from_truth": ((block.get("model") or {}).get("reference") or {}).get(
+                   "added") or [],
                "untrusted": {k: v.get("reason") for k, v in (block.get("trust") or {}).items()
                              if not v.get("trusted") and block.get(k) is not None}}
         for key in _LRDE_QUANTITIES:
@@ -229,6 +232,8 @@ def _headlines(run: Mapping) -> list[tuple[str, list[str]]]:
                     parts.append(f"{key} {_angle(q3['median'])} [{_angle(q3['q05'])}, {_angle(q3['q95'])}]")
             state = "converged" if r.get("converged") else "NOT converged"
             model = f"; model {r['model']}" if r.get("model") else ""
+            if r.get("added_from_truth"):
+                model += f", {' and '.join(r['added_from_truth'])} found against the truth channel"
             lines.append(f"{r['log_id']}: " + ", ".join(parts) + f" (90 %; {state}{model})")
             untrusted = r.get("untrusted") or {}
             if untrusted:

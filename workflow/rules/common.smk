@@ -191,6 +191,12 @@ def rig_truth_cpr(wildcards):
     return float(cpr) * float(chan.get("gear_ratio") or 1) if cpr else None
 
 
+def lrde_residual_inputs(wildcards):
+    """The log's residuals.json files: what the residual stage found enters the LRDE fit."""
+    return [f"results/{wildcards.log_id}/residuals/{p['measured']}/residuals.json"
+            for p in RESIDUAL_PAIRS.get(wildcards.log_id, [])]
+
+
 def lrde_settings(wildcards):
     """config["lrde"] updated with the log's own analysis.lrde block."""
     settings = dict(config.get("lrde") or {})

@@ -4,6 +4,8 @@
 rule lrde_fit:
     input:
         canonical="results/{log_id}/canonical.parquet",
+        # with a truth channel, the residual stage's findings on the coarse channel
+        residuals=lrde_residual_inputs,
     output:
         block="results/{log_id}/lrde/lrde.json",
         cycles="results/{log_id}/lrde/cycles.csv",

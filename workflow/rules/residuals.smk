@@ -18,6 +18,8 @@ rule residuals:
         settings=lambda wc: residual_settings(wc),
         code=CODE_DIGEST,
     threads: 1
+    # an LRDE fit (the longest job) waits for its log's residual stage
+    priority: 1
     log:
         "results/{log_id}/logs/residuals_{channel}.log",
     benchmark:

@@ -39,8 +39,12 @@ stays a motion term; any of these effects combine with it and with each other.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
-from scipy.special import log_ndtr, logsumexp
+from scipy.special import erfc, log_ndtr, logsumexp
+
+from enclab.lrde import model
 
 __all__ = ["EFFECTS", "check_effects", "effect_param_names", "effect_bounds", "effect_scales",
            "pointwise_log_likelihood", "log_likelihood", "jump_posterior", "simulate_counts",
@@ -62,6 +66,7 @@ _SIGNATURES = {
 _HYST_MAX = 0.5
 _JITTER_MAX = 1.0
 _DRIFT_MAX = 0.1
+_RELAY_ROWS_VECTOR = 16  # from this many simulated readings on, the relay runs vectorised
 
 
 def check_effects(effects) -> tuple:
@@ -114,18 +119,43 @@ def _phase(p, t, t_ref, drift_col):
     return omega * (u + 0.5 * kappa * u * u) + p[:, 3:4], omega * (1.0 + kappa * u)
 
 
-def _motion_and_speed(p, t, t_ref, harmonics, drift_col):
-    """Motion about the bias in steps and its time derivative (steps/s), rows of ``p``."""
-    phi, dphi = _phase(p, t, t_ref, drift_col)
+def _motion_and_speed(p, t, t_ref, harmonics, drift_col, grid=None, speed=True):
+    """Motion about the bias in steps and its time derivative (steps/s), rows of ``p``.
+
+    Without drift on a uniform grid (``grid``, :func:`enclab.lrde.model.uniform_grid`) the
+    phase factor ``exp(i phi)`` comes from block-wise rotation; otherwise from one ``sin`` and
+    one ``cos`` per entry. The harmonics ``cos(k phi)``, ``sin(k phi)`` are the parts of its
+    powers (one complex product per order instead of two transcendental functions). With
+    ``speed=False`` the derivative is not formed and None is returned in its place.
+    """
     half_a = 0.5 * p[:, 0:1]
-    motion = half_a * np.sin(phi)
-    dmotion = half_a * np.cos(phi)
+    if drift_col is None and grid is not None:
+        omega, phase = 2.0 * np.pi * p[:, 2], p[:, 3]
+        if not harmonics and not speed:
+            motion = model._sine_on_grid(omega, phase, grid, t_ref)
+            motion *= half_a
+            return motion, None
+        phasor = model._phasor_on_grid(omega, phase, grid, t_ref)
+        dphi = omega[:, None]
+    else:
+        phi, dphi = _phase(p, t, t_ref, drift_col)
+        if not harmonics:
+            motion = np.sin(phi)
+            motion *= half_a
+            return motion, (half_a * np.cos(phi) * dphi if speed else None)
+        phasor = np.cos(phi) + 1j * np.sin(phi)
+    motion = half_a * phasor.imag
+    dmotion = half_a * phasor.real if speed else None
+    power, order = phasor, 1
     for j, k in enumerate(harmonics):
+        while order < k:
+            power, order = power * phasor, order + 1
         c, s = p[:, 5 + 2 * j:6 + 2 * j], p[:, 6 + 2 * j:7 + 2 * j]
-        ck, sk = np.cos(k * phi), np.sin(k * phi)
+        ck, sk = power.real, power.imag
         motion += c * ck + s * sk
-        dmotion += k * (s * ck - c * sk)
-    return motion, dmotion * dphi
+        if speed:
+            dmotion += k * (s * ck - c * sk)
+    return motion, (dmotion * dphi if speed else None)
 
 
 def _columns(harmonics, effects):
@@ -142,8 +172,93 @@ def _log_interval(lo, hi):
         return log_hi + np.log1p(-np.exp(log_ndtr(lo) - log_hi))
 
 
+_DEEP = 8.0
+_SQRT_HALF = np.sqrt(0.5)
+
+
+def _log_interval_sparse(lower, upper):
+    """``log(Phi(upper) - Phi(lower))`` at the entries where it differs from 0 noticeably.
+
+    Returns the flat indices of those entries and their values; every other entry has
+    ``lower < -8`` and ``upper > 8`` and its value is above ``-1.3e-15``. The others, by kind:
+
+    - one bound beyond 8 standard deviations and the interval reaching past 0
+      (``lower < -8``, ``upper >= 0``, or the mirror image): the far bound's
+      ``Phi(-8) = 6.2e-16`` is dropped against a probability above 1/2, and
+      ``log Phi(x) = log1p(-erfc(x / sqrt 2) / 2)`` for the near bound ``x >= 0``;
+    - both bounds within 8: ``log`` of the difference of the two tail probabilities
+      (``erfc``) on the side of 0 where both are smallest (``Q(l) - Q(u)`` when ``u > 0``,
+      else ``Phi(u) - Phi(l)``), which keeps full relative precision (no tail value is below
+      ``Phi(-8)``, so none underflows);
+    - the rest (an interval entirely beyond 8 on one side): the exact reflected form
+      :func:`_log_interval`.
+    """
+    lo_near = lower >= -_DEEP
+    up_near = upper <= _DEEP
+    keep = np.flatnonzero(lo_near | up_near)
+    lo, up = lower.ravel()[keep], upper.ravel()[keep]
+    lo_near, up_near = lo_near.ravel()[keep], up_near.ravel()[keep]
+    both = lo_near & up_near
+    single = ~both & np.where(lo_near, lo <= 0.0, up >= 0.0)
+    vals = np.empty(keep.size)
+    x = np.where(lo_near[single], -lo[single], up[single])
+    vals[single] = np.log1p(-0.5 * erfc(x * _SQRT_HALF))
+    up_pos = up[both] > 0.0
+    a = np.where(up_pos, lo[both], -up[both])
+    b = np.where(up_pos, up[both], -lo[both])
+    with np.errstate(divide="ignore"):
+        vals[both] = np.log(0.5 * (erfc(a * _SQRT_HALF) - erfc(b * _SQRT_HALF)))
+    rest = ~(both | single)
+    if np.any(rest):
+        vals[rest] = _log_interval(lo[rest], up[rest])
+    return keep, vals
+
+
+def _interval_bounds(p, t, counts, centre_count, t_ref, harmonics, effects, offset, time_blur,
+                     grid):
+    """Standardised interval bounds ``(lower, upper)`` of every reading, rows of ``p``."""
+    cols = _columns(harmonics, effects)
+    t = np.asarray(t, dtype=float)
+    k = np.asarray(counts, dtype=float) - offset
+    jitter = "time_jitter" in cols or time_blur > 0
+    motion, speed = _motion_and_speed(p, t, t_ref, harmonics, cols.get("drift"),
+                                      grid=grid if t.size > 1 else None, speed=jitter)
+    # z - k, built in place: the reading k's interval is [k + lo_shift, k + hi_shift).
+    zk = motion
+    zk += (centre_count + 0.5) + p[:, 1:2]
+    zk -= k
+    log_s = p[:, 4:5]
+    if jitter:
+        sig_t2 = time_blur ** 2
+        if "time_jitter" in cols:
+            dt = np.median(np.diff(t)) if t.size > 1 else 1.0
+            sig_t2 = sig_t2 + (p[:, cols["time_jitter"]:cols["time_jitter"] + 1] * dt) ** 2
+        s = 10.0 ** log_s
+        inv_s = 1.0 / np.sqrt(s * s + speed * speed * sig_t2)
+    else:
+        inv_s = 10.0 ** -log_s
+    if "hysteresis" in cols:
+        # Previous reading c: k > c reads [k + w/2, k + 1 + w/2), k < c [k - w/2, k + 1 - w/2),
+        # k = c [k - w/2, k + 1 + w/2).
+        half_w = 0.5 * p[:, cols["hysteresis"]:cols["hysteresis"] + 1]
+        prev = np.concatenate((k[:1], k[:-1]))
+        lo_sign = np.where(k > prev, 1.0, -1.0)
+        hi_sign = np.where(k < prev, -1.0, 1.0)
+        lower = half_w * lo_sign
+        lower -= zk
+        upper = half_w * hi_sign
+        upper += 1.0
+        upper -= zk
+    else:
+        lower = -zk
+        upper = 1.0 - zk
+    lower *= inv_s
+    upper *= inv_s
+    return lower, upper
+
+
 def pointwise_log_likelihood(params, t, counts, step, centre_count, t_ref, harmonics=(),
-                             effects=(), offset=0, time_blur=0.0) -> np.ndarray:
+                             effects=(), offset=0, time_blur=0.0, grid=None) -> np.ndarray:
     """``log p(count_j | previous count, theta)`` per parameter row and sample.
 
     Parameters
@@ -162,40 +277,29 @@ def pointwise_log_likelihood(params, t, counts, step, centre_count, t_ref, harmo
     time_blur : float
         Extra timing uncertainty in s, added like ``time_jitter`` (prediction of held-out
         readings from a point fit, see :func:`enclab.lrde.compare.compare_effect_models`).
+    grid : tuple, optional
+        :func:`enclab.lrde.model.uniform_grid` of ``t`` (faster phase factor), or None.
 
     Returns
     -------
     numpy.ndarray, shape (n_rows, len(t))
+        Entries with both interval bounds beyond 8 standard deviations are 0 (their value is
+        above ``-1.3e-15``).
     """
     p = np.atleast_2d(np.asarray(params, dtype=float))
     effects = check_effects(effects)
-    cols = _columns(harmonics, effects)
-    t = np.asarray(t, dtype=float)
-    k = np.asarray(counts, dtype=float) - offset
-    motion, speed = _motion_and_speed(p, t, t_ref, harmonics, cols.get("drift"))
-    z = centre_count + 0.5 + p[:, 1:2] + motion
-    s = 10.0 ** p[:, 4:5]
-    if "time_jitter" in cols or time_blur > 0:
-        sig_t2 = time_blur ** 2
-        if "time_jitter" in cols:
-            dt = np.median(np.diff(t)) if t.size > 1 else 1.0
-            sig_t2 = sig_t2 + (p[:, cols["time_jitter"]:cols["time_jitter"] + 1] * dt) ** 2
-        s = np.sqrt(s * s + speed * speed * sig_t2)
-    lo = np.broadcast_to(k, z.shape).copy()
-    hi = lo + 1.0
-    if "hysteresis" in cols:
-        half_w = 0.5 * p[:, cols["hysteresis"]:cols["hysteresis"] + 1]
-        prev = np.concatenate(([k[0]], k[:-1]))
-        up, down, stay = k > prev, k < prev, k == prev
-        lo = lo + np.where(up, half_w, 0.0) - np.where(down | stay, half_w, 0.0)
-        hi = hi + np.where(up | stay, half_w, 0.0) - np.where(down, half_w, 0.0)
-    return _log_interval((lo - z) / s, (hi - z) / s)
+    lower, upper = _interval_bounds(p, t, counts, centre_count, t_ref, harmonics, effects,
+                                    offset, time_blur, grid)
+    out = np.zeros(lower.shape)
+    keep, vals = _log_interval_sparse(lower, upper)
+    out.ravel()[keep] = vals
+    return out
 
 
-def _jump_terms(params, t, counts, step, centre_count, t_ref, harmonics, effects):
+def _jump_terms(params, t, counts, step, centre_count, t_ref, harmonics, effects, grid=None):
     """Log-likelihood of every jump index and sign: array (n_rows, 2, n - 1) and the signs."""
     base = pointwise_log_likelihood(params, t, counts, step, centre_count, t_ref, harmonics,
-                                    effects)
+                                    effects, grid=grid)
     n = base.shape[1]
     c0 = np.cumsum(base, axis=1)
     total0 = c0[:, -1:]
@@ -205,7 +309,7 @@ def _jump_terms(params, t, counts, step, centre_count, t_ref, harmonics, effects
     signs = (1, -1)
     for delta in signs:
         shifted = pointwise_log_likelihood(params, t, counts, step, centre_count, t_ref,
-                                           harmonics, effects, offset=delta)
+                                           harmonics, effects, offset=delta, grid=grid)
         cd = np.cumsum(shifted, axis=1)
         # Shorter segment offset by delta from the reference (longer) segment.
         before_short = cd[:, idx - 1] + (total0 - c0[:, idx - 1])
@@ -214,18 +318,23 @@ def _jump_terms(params, t, counts, step, centre_count, t_ref, harmonics, effects
     return np.stack(out, axis=1), signs
 
 
-def log_likelihood(params, t, counts, step, centre_count, t_ref, harmonics=(), effects=()):
+def log_likelihood(params, t, counts, step, centre_count, t_ref, harmonics=(), effects=(),
+                   grid=None):
     """Total log-likelihood per parameter row; ``count_jump`` marginalised over index and sign.
 
     The jump's prior is uniform over the ``n - 1`` gaps between samples and the two signs.
+    ``grid`` is :func:`enclab.lrde.model.uniform_grid` of ``t`` or None (same values, slower).
     """
     effects = check_effects(effects)
     p = np.atleast_2d(np.asarray(params, dtype=float))
     if "count_jump" not in effects:
-        out = pointwise_log_likelihood(p, t, counts, step, centre_count, t_ref, harmonics,
-                                       effects).sum(axis=1)
+        lower, upper = _interval_bounds(p, t, counts, centre_count, t_ref, harmonics, effects,
+                                        0, 0.0, grid)
+        keep, vals = _log_interval_sparse(lower, upper)
+        out = np.bincount(keep // lower.shape[1], weights=vals, minlength=p.shape[0])
     else:
-        terms, _ = _jump_terms(p, t, counts, step, centre_count, t_ref, harmonics, effects)
+        terms, _ = _jump_terms(p, t, counts, step, centre_count, t_ref, harmonics, effects,
+                               grid)
         flat = terms.reshape(p.shape[0], -1)
         out = logsumexp(flat, axis=1) - np.log(flat.shape[1])
     return out if np.ndim(params) == 2 else float(out[0])
@@ -285,15 +394,29 @@ def simulate_counts(rng, t, step, A12, a_eq, f_hz, phase, t_ref=0.0, noise_std=0
     half_w = 0.5 * hysteresis / step
     if half_w > 0:
         out = np.empty(x.shape, dtype=np.int64)
-        state = np.floor(x[:, 0])
-        out[:, 0] = state
-        for j in range(1, t.size):
-            xj = x[:, j]
-            up = xj >= state + 1.0 + half_w
-            down = xj < state - half_w
-            state = np.where(up, np.floor(xj - half_w), np.where(down, np.floor(xj + half_w),
-                                                                   state))
-            out[:, j] = state
+        if reps < _RELAY_ROWS_VECTOR:
+            # Few readings: a plain loop over floats costs far less than numpy's per-call
+            # overhead on rows this short (same IEEE arithmetic, same readings).
+            for r, row in enumerate(x.tolist()):
+                state = math.floor(row[0])
+                states = [state]
+                for xj in row[1:]:
+                    if xj >= state + 1.0 + half_w:
+                        state = math.floor(xj - half_w)
+                    elif xj < state - half_w:
+                        state = math.floor(xj + half_w)
+                    states.append(state)
+                out[r] = states
+        else:
+            state = np.floor(x[:, 0])
+            out[:, 0] = state
+            for j in range(1, t.size):
+                xj = x[:, j]
+                up = xj >= state + 1.0 + half_w
+                down = xj < state - half_w
+                state = np.where(up, np.floor(xj - half_w),
+                                 np.where(down, np.floor(xj + half_w), state))
+                out[:, j] = state
     else:
         out = np.floor(x).astype(np.int64)
     if jump is not None:

@@ -38,9 +38,12 @@ The log-likelihood is vectorised over walkers (``vectorize=True``) and over the 
 ensembles, which move side by side in one sampler (``_EnsemblesMove``: one call per
 half-step for all of them, evaluated in cache-sized slices of walkers). On a uniform time
 grid the sine comes from block-wise complex rotation instead of ``np.sin``, and only samples
-within 8 standard deviations of an interval edge reach ``log_ndtr``
+within 8 standard deviations of an interval edge reach a special function
 (workflow/benchmarks/bench_lrde_throughput.py measures both against ``np.sin`` and a
-``log_ndtr`` of every sample).
+``log_ndtr`` of every sample): one ``erfc`` where a single edge is near, two where both are
+(:func:`enclab.lrde.effects._log_interval_sparse`). The effect models' likelihood
+(:mod:`enclab.lrde.effects`) shares both, and takes the harmonics ``cos k phi, sin k phi``
+as powers of the phase factor.
 
 References
 ----------
@@ -61,9 +64,10 @@ from scipy.special import log_ndtr
 
 from enclab.lrde import diagnostics, dwell, model
 from enclab.lrde import effects as lrde_effects
+from enclab.lrde.model import _phasor_on_grid, _sine_on_grid, uniform_grid
 
 __all__ = ["PARAM_NAMES", "FitResult", "log_likelihood", "log_probability", "initial_guess",
-           "fit_sinusoid"]
+           "fit_sinusoid", "truth_rounding_bound"]
 
 PARAM_NAMES = ("A12", "E_b", "f_hz", "phase", "sigma")
 _HARMONIC_BOUND = 0.5  # |c_k|, |s_k| < step / 2: distortion well below the stroke
@@ -84,6 +88,7 @@ def _check_harmonics(harmonics) -> tuple:
     return tuple(int(k) for k in h)
 _DEEP = 8.0
 _LOG_SIGMA_BOUNDS = (-4.0, -0.5)
+_CACHE_ENTRIES = 65_536
 _UNIDENTIFIED = ("readings identify only a_eq = a + b (Zhang & Gao eq. 13b); the offset a and "
                  "the bias b separate only with a truth channel or a known rest position")
 
@@ -114,59 +119,6 @@ def _log_interval_prob(lower, upper):
         log_up = log_ndtr(up)
         out[both] = log_up + np.log1p(-np.exp(log_ndtr(lo) - log_up))
     return out
-
-
-def uniform_grid(t, rtol=1e-9):
-    """``(t0, dt, n)`` when ``t`` is an arithmetic sequence to within ``rtol * dt``, else None.
-
-    On such a grid the sinusoid is evaluated by complex rotation (:func:`_sine_on_grid`),
-    about 4x faster than ``np.sin``; logs with timestamp jitter take the direct path.
-    """
-    t = np.asarray(t, dtype=float)
-    if t.size < 2:
-        return None
-    dt = (t[-1] - t[0]) / (t.size - 1)
-    if not dt > 0 or np.max(np.abs(t - (t[0] + dt * np.arange(t.size)))) > rtol * dt:
-        return None
-    return float(t[0]), float(dt), int(t.size)
-
-
-_BLOCK = 64
-_CACHE_ENTRIES = 65_536
-
-
-def _phasor_on_grid(omega, phase, grid, t_ref):
-    """``exp(i (omega (t - t_ref) + phase))`` for ``t = t0 + k dt``, one row per ``omega``.
-
-    ``exp(i omega (t0 + (B j + m) dt))`` is the product of a block start
-    ``exp(i omega (t0 + B j dt))`` and an in-block rotation ``exp(i omega m dt)``, so only
-    ``n / B + B`` complex exponentials are taken per row. Each factor is evaluated directly
-    (no recurrence), so the error stays at a few ulp of the angle for any log length
-    (tests/test_lrde_fit.py compares it with ``np.sin``).
-    """
-    t0, dt, n = grid
-    n_blocks = -(-n // _BLOCK)
-    within = np.exp(1j * np.multiply.outer(omega, dt * np.arange(_BLOCK)))
-    starts = np.exp(1j * (np.multiply.outer(omega, (t0 - t_ref) + dt * _BLOCK
-                                            * np.arange(n_blocks)) + phase[:, None]))
-    rot = starts[:, :, None] * within[:, None, :]
-    return rot.reshape(omega.size, -1)[:, :n]
-
-
-def _sine_on_grid(omega, phase, grid, t_ref):
-    """``sin(omega (t - t_ref) + phase)`` on a uniform grid (see :func:`_phasor_on_grid`).
-
-    Only the imaginary part of each product is formed, ``Im(s w) = Re s Im w + Im s Re w``:
-    half the arithmetic and memory of the complex product.
-    """
-    t0, dt, n = grid
-    n_blocks = -(-n // _BLOCK)
-    within = np.exp(1j * np.multiply.outer(omega, dt * np.arange(_BLOCK)))[:, None, :]
-    starts = np.exp(1j * (np.multiply.outer(omega, (t0 - t_ref) + dt * _BLOCK
-                                            * np.arange(n_blocks)) + phase[:, None]))[:, :, None]
-    sine = starts.real * within.imag
-    sine += starts.imag * within.real
-    return sine.reshape(omega.size, -1)[:, :n]
 
 
 def _motion_steps(p, t, t_ref, grid, harmonics):
@@ -229,7 +181,7 @@ def log_likelihood(params, t, counts, step, centre_count, t_ref, grid=None, harm
     """
     if effects:
         return lrde_effects.log_likelihood(params, t, counts, step, centre_count, t_ref,
-                                           harmonics, effects)
+                                           harmonics, effects, grid=grid)
     p = np.atleast_2d(params)
     eb, log_s = p[:, 1:2], p[:, 4:5]
     inv_s = 10.0 ** -log_s
@@ -246,21 +198,13 @@ def log_likelihood(params, t, counts, step, centre_count, t_ref, grid=None, harm
 def _log_interval_prob_scaled(lower, inv_s):
     """Row sums of ``log(Phi(lower + inv_s) - Phi(lower))`` (intervals of width ``1/s``).
 
-    Same values as :func:`_log_interval_prob` on the entries with a bound within ``_DEEP`` of
-    0 (the others contribute less than ``Phi(-8) = 6.2e-16`` each): one ``log_ndtr`` per entry
-    with a single near bound, the full two-bound form only where both are near.
+    Entries with both bounds beyond ``_DEEP`` of 0 are skipped (each above ``-1.3e-15``); an
+    entry with a single near bound costs one ``log_ndtr``, the others the exact two-bound
+    form (:func:`enclab.lrde.effects._log_interval_sparse`).
     """
-    flat, n_cols = lower.ravel(), lower.shape[1]
-    near = np.flatnonzero((lower >= -_DEEP) | (lower <= _DEEP - inv_s))
-    rows = near // n_cols
-    lo = flat[near]
-    up = lo + np.ravel(inv_s)[rows]
-    lower_near = lo >= -_DEEP
-    vals = log_ndtr(np.where(lower_near, -lo, up))
-    both = lower_near & (up <= _DEEP)
-    if np.any(both):
-        vals[both] = _log_interval_prob(lo[both], up[both])
-    return np.bincount(rows, weights=vals, minlength=lower.shape[0])
+    upper = lower + inv_s
+    keep, vals = lrde_effects._log_interval_sparse(lower, upper)
+    return np.bincount(keep // lower.shape[1], weights=vals, minlength=lower.shape[0])
 
 
 def log_probability(params, t, counts, step, centre_count, t_ref, bounds, grid=None,
@@ -621,10 +565,33 @@ def _chain_diagnostics(internal: np.ndarray, names) -> tuple[dict, dict, dict]:
     return tau, rhat, ess
 
 
+def truth_rounding_bound(amplitude, truth_step, n_terms=4000) -> float:
+    """Bound of the mean rounding error of a sine read by a uniform quantizer of step ``s``.
+
+    The error ``s round(theta/s) - theta`` is the sawtooth ``sum_k (s / (pi k)) (-1)^k
+    sin(2 pi k theta / s)``; averaged over the phase of ``theta = b + A sin(phi)`` each term
+    becomes ``J0(2 pi k A / s) sin(2 pi k b / s)``, so whatever ``b`` the mean error is at most
+    ``(s / pi) sum_k |J0(2 pi k A / s)| / k`` (the series converges as ``k^-3/2``; the tail
+    after ``n_terms`` is bounded by its asymptote and added), and never more than ``s / 2``.
+    """
+    from scipy.special import j0
+
+    amplitude, s = abs(float(amplitude)), float(truth_step)
+    if not (np.isfinite(amplitude) and np.isfinite(s) and s > 0):
+        raise ValueError(f"amplitude and truth_step must be finite, truth_step > 0; got "
+                         f"{amplitude!r}, {truth_step!r}")
+    k = np.arange(1, int(n_terms) + 1)
+    head = float(np.sum(np.abs(j0(2.0 * np.pi * k * amplitude / s)) / k))
+    # |J0(x)| <= sqrt(2 / (pi x)) for large x: the tail sum_{k > n} k^-3/2 < 2 / sqrt(n).
+    tail = (np.sqrt(2.0 / (np.pi * 2.0 * np.pi * amplitude / s)) * 2.0 / np.sqrt(n_terms)
+            if amplitude > 0 else 0.0)
+    return min(s / np.pi * (head + tail), 0.5 * s)  # never more than half a step
+
+
 def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250, n_burn=150,
                  f_hz=None, truth=None, rest_position=None, sigma_range=None,
                  sigma_prior="uniform", moves="de", harmonics=(), effects=(),
-                 start=None, max_steps=None) -> FitResult:
+                 start=None, max_steps=None, truth_step=None) -> FitResult:
     """Posterior of stroke, bias deviation, frequency, phase and noise from coarse counts.
 
     Parameters
@@ -655,6 +622,10 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
         The motion centre ``b`` in the encoder's frame when it is known by construction (e.g.
         0 when the drive oscillates about the angle where the counter was zeroed); gives
         ``a = a_eq - rest_position``. Ignored when ``truth`` is given.
+    truth_step : float, optional
+        Step (rad) of a quantized truth channel. The mean of its rounding error over the
+        motion is a bias of ``b``, not noise, so it is not in the residual's standard error;
+        ``b``'s interval is widened by its bound (:func:`truth_rounding_bound`).
     sigma_range : (float, float), optional
         Prior range of the position jitter ``sigma`` in steps, default ``(1e-4, 10**-0.5)``.
         A lab that knows its jitter closely can give it here.
@@ -770,8 +741,12 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
         n_batches = int(min(20, max(2, t.size // 10)))
         batch_means = np.array([chunk.mean() for chunk in np.array_split(resid, n_batches)])
         b_se = float(batch_means.std(ddof=1) / np.sqrt(n_batches))
-        b_draws = b_hat + b_se * np.random.default_rng(root.spawn(1)[0]).standard_t(
-            n_batches - 1, a_eq.size)
+        rng = np.random.default_rng(root.spawn(1)[0])
+        b_draws = b_hat + b_se * rng.standard_t(n_batches - 1, a_eq.size)
+        if truth_step is not None:
+            # Unknown within its bound: uniform over it, on top of the statistical part.
+            bound = truth_rounding_bound(float(np.hypot(coef[1], coef[2])), truth_step)
+            b_draws = b_draws + bound * rng.uniform(-1.0, 1.0, a_eq.size)
         bias_b = _quantiles(b_draws)
         offset_a = _quantiles(a_eq - b_draws)
         reason = ("bias b from the truth channel (least-squares intercept at the posterior "

@@ -29,11 +29,15 @@ see :func:`enclab.lrde.compare.compare_effect_models`.
 The paper's sinusoid is fitted first (``before``); when the comparison chooses a model with
 an added term, that model is fitted the same way and its posterior gives the reported
 ``A12``, ``E_b``, ``a_eq``, ``offset_a``, ``bias_b`` (``after``); ``trust`` says per quantity
-whether it can be relied on and why not.
+whether it can be relied on and why not. With a truth channel, what the residual stage found on
+the coarse channel (``references``) joins the final model and is set against its terms
+(``model.reference``).
 """
 from __future__ import annotations
 
+import concurrent.futures
 import logging
+import multiprocessing as mp
 
 import numpy as np
 import pandas as pd
@@ -88,6 +92,24 @@ def _compare_effects(t, counts, step, seed, settings) -> tuple:
     return None, comparison
 
 
+def _fit(t, counts, step, seed, kwargs):
+    return fit.fit_sinusoid(t, counts, step, seed, **kwargs)
+
+
+def _run_fits(t, counts, step, before, after, threads):
+    """The ``before`` fit and, when ``after`` is given, the ``after`` fit (``(seed, kwargs)``
+    each); side by side in a forked worker process when ``threads >= 2``."""
+    if after is None or threads < 2 or "fork" not in mp.get_all_start_methods():
+        return (_fit(t, counts, step, *before),
+                None if after is None else _fit(t, counts, step, *after))
+    with concurrent.futures.ProcessPoolExecutor(
+            max_workers=1, mp_context=mp.get_context("fork")) as pool:
+        # The longer fit (the richer model) stays in this process.
+        pending = pool.submit(_fit, t, counts, step, *before)
+        chosen = _fit(t, counts, step, *after)
+        return pending.result(), chosen
+
+
 def select_channels(df: pd.DataFrame, meta: dict, settings: dict):
     """Pick the coarse counts, their step and the truth angle of a canonical log.
 
@@ -98,7 +120,8 @@ def select_channels(df: pd.DataFrame, meta: dict, settings: dict):
     truth : numpy.ndarray or None
         True angle in rad, or None.
     info : dict
-        ``measured`` and ``truth`` channel names and ``requantized`` (bool).
+        ``measured`` and ``truth`` channel names, ``requantized`` (bool) and ``truth_step``
+        (the truth channel's step in rad when it is stored as counts, else None).
     """
     channels = meta.get("channels")
     if not channels:
@@ -121,6 +144,8 @@ def select_channels(df: pd.DataFrame, meta: dict, settings: dict):
         truths = same_joint or truths
     truth_ch = truths[0] if truths else None
     truth = _angle(df, truth_ch) if truth_ch is not None else None
+    truth_step = (float(truth_ch["step"]) if truth_ch is not None
+                  and truth_ch.get("storage") == "counts" and truth_ch.get("step") else None)
     if measured is not None:
         if measured.get("storage") != "counts" or not measured.get("step"):
             raise ValueError(f"measured channel {measured['name']!r} must be stored as counts "
@@ -128,7 +153,7 @@ def select_channels(df: pd.DataFrame, meta: dict, settings: dict):
         counts = df[measured["name"]].to_numpy().astype(np.int64)
         return counts, float(measured["step"]), truth, {
             "measured": measured["name"], "truth": truth_ch and truth_ch["name"],
-            "requantized": False}
+            "requantized": False, "truth_step": truth_step}
     req = settings.get("requantize")
     if truth is None or not req:
         raise ValueError("the log has no measured counts channel; give settings['requantize'] "
@@ -140,10 +165,11 @@ def select_channels(df: pd.DataFrame, meta: dict, settings: dict):
     step = float(req["step"])
     counts = quantize(truth, step, float(req.get("offset_frac", 0.5)))
     return counts, step, truth, {"measured": None, "truth": truth_ch["name"],
-                                 "requantized": True}
+                                 "requantized": True, "truth_step": truth_step}
 
 
-def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict):
+def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
+                     references: dict | None = None, threads: int = 1):
     """Dwell baselines and the Bayesian fit of one canonical log.
 
     Parameters
@@ -157,6 +183,15 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict):
         Root seed of the fit and of the posterior-predictive draws.
     settings : dict
         See the module docstring.
+    references : dict, optional
+        Per measured channel, what the residual stage found on it against the truth channel
+        (:func:`enclab.reference_effects.lrde_reference`). The encoder and clock terms it
+        names enter the final fit even when the held-out comparison did not choose them, and
+        the report sets each term of the fit against the reference (``model.reference``).
+    threads : int
+        Processes for the two emcee fits: with 2 or more, the paper's sinusoid (``before``)
+        and the final model (``after``) are sampled at the same time (they depend only on
+        the comparison and their own seeds, so the results are the same as with 1).
 
     Returns
     -------
@@ -186,29 +221,43 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict):
     # The comparison first: its point fit of the sinusoid starts the ensembles near the
     # posterior, so that a short burn-in suffices.
     model_block, comparison = _compare_effects(t, counts, step, compare_seed, settings)
-    result = fit.fit_sinusoid(
-        t, counts, step, fit_seed, f_hz=f_hz,
-        truth=truth if settings.get("use_truth", True) else None,
-        rest_position=settings.get("rest_position"),
-        start=None if comparison is None else comparison["full_fits"]["sinusoid"]["x"],
-        **_sampler_settings(settings))
+    reference = (references or {}).get(info["measured"]) if info["measured"] else None
+    harmonics = tuple(comparison["chosen_harmonics"]) if comparison else ()
+    chosen = tuple(comparison["chosen_effects"]) if comparison else ()
+    added = [e for e in (reference or {}).get("effects", [])
+             if e in lrde_effects.EFFECTS and e not in chosen]
+    common = {"f_hz": f_hz, "truth": truth if settings.get("use_truth", True) else None,
+              "truth_step": info.get("truth_step"),
+              "rest_position": settings.get("rest_position"), **_sampler_settings(settings)}
+    before_kw = {"start": None if comparison is None
+                 else comparison["full_fits"]["sinusoid"]["x"], **common}
+    point, after_kw = None, None
+    if added:
+        # The truth channel saw an effect the readings alone did not resolve: the final
+        # model is the comparison's choice plus that effect, from its own optimum.
+        point = fit.map_fit(t, counts, step, f_hz=f_hz, harmonics=harmonics,
+                            effects=chosen + tuple(added),
+                            start=None if comparison is None
+                            else comparison["full_fits"][comparison["chosen"]]["x"],
+                            sigma_range=settings.get("sigma_range_steps"),
+                            sigma_prior=settings.get("sigma_prior", "uniform"))
+    elif harmonics or chosen:
+        point = comparison["full_fits"][comparison["chosen"]]
+    if point is not None:
+        after_kw = {"harmonics": harmonics, "effects": chosen + tuple(added),
+                    "start": point["x"], **common}
+    result, chosen_fit = _run_fits(t, counts, step, (fit_seed, before_kw),
+                                   None if after_kw is None else (after_seed, after_kw), threads)
     # The wall time goes to the log, not the block: summary.json must be byte-reproducible.
     _log.info("emcee fit: %.1f s wall, acceptance %.2f", result.wall_time_s, result.acceptance)
     before = result
-    if comparison is not None:
-        chosen_fit, jump = None, None
-        if comparison["chosen"] != "sinusoid":
-            point = comparison["full_fits"][comparison["chosen"]]
-            chosen_fit = fit.fit_sinusoid(
-                t, counts, step, after_seed, f_hz=f_hz,
-                truth=truth if settings.get("use_truth", True) else None,
-                rest_position=settings.get("rest_position"),
-                harmonics=tuple(comparison["chosen_harmonics"]),
-                effects=tuple(comparison["chosen_effects"]), start=point["x"],
-                **_sampler_settings(settings))
-            _log.info("emcee fit of %s: %.1f s wall", comparison["chosen"],
-                      chosen_fit.wall_time_s)
-            if "count_jump" in comparison["chosen_effects"]:
+    if comparison is not None or added:
+        jump = None
+        if chosen_fit is not None:
+            _log.info("emcee fit of %s: %.1f s wall", "+".join(
+                [f"harmonic{k}" for k in harmonics] + list(chosen + tuple(added))),
+                chosen_fit.wall_time_s)
+            if "count_jump" in point["effects"]:
                 index, delta, mass, _ = lrde_effects.jump_posterior(
                     point["x"], t, counts, step, point["centre"], point["t_ref"],
                     point["harmonics"], point["effects"])
@@ -216,10 +265,21 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict):
                         "probability_within_1_sample": mass,
                         "frame": "a_eq refers to the longer segment; the shorter one reads "
                                  f"{delta:+d} count"}
-        model_block = report.effect_model_block(comparison, chosen_fit,
-                                                duration_s=float(t[-1] - t[0]), jump=jump)
+        if comparison is not None:
+            model_block = report.effect_model_block(comparison, chosen_fit,
+                                                    duration_s=float(t[-1] - t[0]), jump=jump)
+        else:
+            model_block = dict(model_block, harmonics=[], signature={},
+                               params=report.effect_params(chosen_fit, float(t[-1] - t[0]),
+                                                           jump))
+        if added:
+            model_block["effects"] = list(chosen) + added
+            model_block["signature"] = {e: lrde_effects.effect_signature(e)
+                                        for e in model_block["effects"]}
         if chosen_fit is not None:
             result = chosen_fit
+    if reference is not None:
+        model_block["reference"] = report.reference_block(reference, model_block, added)
     block = report.summary_block(result, summary)
     block["channels"] = info
     block["model"] = model_block

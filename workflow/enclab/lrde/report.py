@@ -13,7 +13,7 @@ import numpy as np
 
 __all__ = ["summary_block", "motion_model_block", "residuals_block", "report_markdown",
            "batch_rows", "effect_model_block", "estimates_block", "trust_block",
-           "effect_residuals_block"]
+           "effect_residuals_block", "reference_block", "effect_params"]
 
 _NOT_CONVERGED = "NOT converged (R-hat > 1.01 or ESS < 1000)"
 
@@ -195,6 +195,14 @@ def effect_model_block(comparison: dict | None, chosen_fit=None, reason: str | N
                    f"{out['chosen']} is not distinguishable from "
                    f"{', '.join(out['indistinguishable'])} on held-out cycles (within two "
                    "standard errors); the estimates are those of the chosen model")
+    out["params"] = effect_params(chosen_fit, duration_s, jump)
+    return out
+
+
+def effect_params(chosen_fit=None, duration_s: float | None = None,
+                  jump: dict | None = None) -> dict:
+    """The ``params`` entry of the ``model`` block: the fit's effect and harmonic parameters
+    (see :func:`effect_model_block`)."""
     params = {}
     if chosen_fit is not None:
         extra = list(chosen_fit.param_names[5:])
@@ -205,16 +213,78 @@ def effect_model_block(comparison: dict | None, chosen_fit=None, reason: str | N
                                         for k, v in chosen_fit.summary["drift"].items()}
     if jump is not None:
         params["jump"] = jump
-    out["params"] = params
-    return out
+    return params
+
+
+# What a term the truth channel does not confirm stands for instead.
+_UNCONFIRMED = {
+    "hysteresis": "the encoder reads its truth channel without a dead band, so the term stands "
+                  "for the motion (it lingers at its turning points, as a closed loop's does)",
+    "count_jump": "the truth channel shows no missed count, so the term stands for a step of "
+                  "the motion itself",
+    "time_jitter": "the truth channel shows no sample-time jitter, so the term stands for "
+                   "noise of the motion",
+}
+
+
+def reference_block(reference: dict | None, model_block: dict, added: list) -> dict | None:
+    """The ``reference`` entry of the ``model`` block: the truth channel's findings and the fit.
+
+    Parameters
+    ----------
+    reference : dict or None
+        :func:`enclab.reference_effects.lrde_reference` of the measured channel.
+    model_block : dict
+        :func:`effect_model_block` of the final fit (its ``effects`` and ``params``).
+    added : list of str
+        Terms the held-out comparison did not choose and the reference added to the fit.
+
+    Returns
+    -------
+    dict or None
+        ``truth``, ``explained``, ``found``, ``not_modelled``, ``added`` and ``terms``: per
+        encoder or clock term of either side, ``status`` (``"found by both"``, ``"added from
+        the truth channel"``, ``"not confirmed by the truth channel"``), the fit's value
+        ``{median, q05, q95}`` (SI), the reference's ``value`` and ``ci`` where it has one,
+        ``consistent`` (the two 90 % intervals overlap; None without both) and ``note``.
+    """
+    if reference is None:
+        return None
+    params = model_block.get("params") or {}
+    by_term = {}
+    for f in reference["found"]:
+        by_term.setdefault(f["term"], f)
+    terms = []
+    for term in list(dict.fromkeys(list(reference["effects"]) + list(model_block["effects"]))):
+        if term == "drift":  # the motion's frequency: not a property of the reading
+            continue
+        ref = by_term.get(term)
+        fit_q = params.get(term) if isinstance(params.get(term), dict) else None
+        row = {"term": term, "fit": fit_q, "reference_value": ref and ref["value"],
+               "reference_ci": ref and ref["ci"], "consistent": None, "note": None}
+        if ref is None:
+            row["status"] = "not confirmed by the truth channel"
+            row["note"] = _UNCONFIRMED.get(term)
+        else:
+            row["status"] = ("added from the truth channel" if term in added
+                             else "found by both")
+            if fit_q is not None and ref["ci"] is not None:
+                row["consistent"] = bool(fit_q["q05"] <= ref["ci"][1]
+                                         and ref["ci"][0] <= fit_q["q95"])
+        terms.append(row)
+    return {"truth": reference["truth"], "explained": reference["explained"],
+            "found": reference["found"], "not_modelled": reference["not_modelled"],
+            "added": list(added), "terms": terms}
 
 
 def trust_block(fit, model_block: dict) -> dict:
     """Per reported quantity ``{trusted, reason}``.
 
     A quantity is untrusted when the chosen model fails the predictive check (its readings
-    are explained worse than its own simulations are), when its sampler did not converge, or
-    (``offset_a``, ``bias_b``) when it is not identified at all.
+    are explained worse than its own simulations are), when its sampler did not converge,
+    when the truth channel (``model_block["reference"]``) shows an effect that breaks an
+    assumption the quantity rests on or leaves the readings unexplained, or (``offset_a``,
+    ``bias_b``) when it is not identified at all.
     """
     reasons = []
     check = model_block.get("check") or {}
@@ -224,9 +294,15 @@ def trust_block(fit, model_block: dict) -> dict:
                        "deviations below its own simulated readings")
     if not fit.converged:
         reasons.append("the sampler did not converge (R-hat > 1.01 or ESS < 1000)")
+    ref = model_block.get("reference") or {}
+    if ref and not ref.get("explained", True):
+        reasons.append(f"against the truth channel ({ref.get('truth')}) the readings hold more "
+                       "than any named effect explains")
     out = {}
     for key in _ESTIMATES:
         r = list(reasons)
+        r += [f"the truth channel shows {e['residual_effect']}, which this model has no term "
+              f"for ({e['why']})" for e in ref.get("not_modelled", []) if key in e["biases"]]
         if fit.summary.get(key) is None:
             r = ["not identified (readings give only a_eq = a + b)"]
         out[key] = {"trusted": not r, "reason": "; ".join(r) if r else None}
@@ -240,7 +316,7 @@ def effect_residuals_block(model_block: dict) -> dict | None:
         return None
     chosen = next(m for m in models if m["label"] == model_block["chosen"])
     effects = []
-    if model_block["chosen"] != "sinusoid":
+    if model_block["effects"] or model_block["harmonics"]:
         params = model_block.get("params") or {}
         for name in list(model_block["effects"]) + [f"harmonic{k}"
                                                      for k in model_block["harmonics"]]:
@@ -314,7 +390,8 @@ def _effect_lines(block: dict) -> list[str]:
         return []
     lines = ["", "## What the sinusoid misses: encoder, clock and motion effects", ""]
     if not m.get("models"):
-        return lines + [f"Not compared: {m.get('reason')}."]
+        return lines + [f"Not compared: {m.get('reason')}."] + _before_after_lines(block) \
+            + _reference_lines(m.get("reference"))
     lines += ["| model | held-out score per cycle [nats] | gain over the sinusoid | z | "
               "delta BIC |", "|---|---|---|---|---|"]
     for r in m["models"]:
@@ -335,13 +412,8 @@ def _effect_lines(block: dict) -> list[str]:
                              f"{q['q95']:.4g}) SI units")
         if m.get("note"):
             lines.append(f"Note: {m['note']}.")
-    before, after = block.get("before"), block.get("after")
-    if before and after and m["chosen"] != "sinusoid":
-        lines += ["", f"| quantity | before (sinusoid) | after ({after['model']}) |",
-                  "|---|---|---|"]
-        for key, label in (("A12", "stroke A12"), ("E_b", "E_b"), ("a_eq", "a_eq"),
-                           ("offset_a", "offset a"), ("bias_b", "bias b")):
-            lines.append(f"| {label} | {_fmt_deg(before.get(key))} | {_fmt_deg(after.get(key))} |")
+    lines += _before_after_lines(block)
+    lines += _reference_lines(m.get("reference"))
     check = m.get("check") or {}
     if check:
         lines += ["", f"Predictive check: the chosen model's log-likelihood is "
@@ -351,6 +423,45 @@ def _effect_lines(block: dict) -> list[str]:
                  if not v["trusted"] and block.get(k) is not None}
     for k, reason in untrusted.items():
         lines.append(f"- {k} untrusted: {reason}.")
+    return lines
+
+
+def _before_after_lines(block: dict) -> list[str]:
+    before, after = block.get("before"), block.get("after")
+    if not (before and after) or before["model"] == after["model"]:
+        return []
+    lines = ["", f"| quantity | before (sinusoid) | after ({after['model']}) |", "|---|---|---|"]
+    for key, label in (("A12", "stroke A12"), ("E_b", "E_b"), ("a_eq", "a_eq"),
+                       ("offset_a", "offset a"), ("bias_b", "bias b")):
+        lines.append(f"| {label} | {_fmt_deg(before.get(key))} | {_fmt_deg(after.get(key))} |")
+    return lines
+
+
+def _reference_lines(ref: dict | None) -> list[str]:
+    if not ref:
+        return []
+    lines = ["", f"### Against the truth channel ({ref['truth']})", "",
+             "The residual stage compares these readings with the exact quantizer model of the "
+             "truth channel: " + ("they match it within the quantization floor."
+                                  if ref["explained"] else "they do not match it fully.")]
+    if ref["added"]:
+        lines.append(f"Added to the fit from its findings: {', '.join(ref['added'])} "
+                     "(too small for the held-out comparison of the readings alone); the "
+                     "'after' estimates above include it.")
+    if ref["terms"]:
+        lines += ["", "| term | status | this fit (90 %) | truth channel (90 %) | consistent |",
+                  "|---|---|---|---|---|"]
+        for r in ref["terms"]:
+            q = r["fit"]
+            fit_txt = "-" if q is None else f"{q['median']:.4g} ({q['q05']:.4g} .. {q['q95']:.4g})"
+            ci = r["reference_ci"]
+            ref_txt = ("-" if r["reference_value"] is None else f"{r['reference_value']:.4g}"
+                       + (f" ({ci[0]:.4g} .. {ci[1]:.4g})" if ci else ""))
+            agree = {True: "yes", False: "NO", None: "-"}[r["consistent"]]
+            lines.append(f"| {r['term']} | {r['status']} | {fit_txt} | {ref_txt} | {agree} |")
+        lines += [f"- {r['term']}: {r['note']}." for r in ref["terms"] if r["note"]]
+    lines += [f"- {e['residual_effect']} (truth channel): no term here; {e['why']}."
+              for e in ref["not_modelled"]]
     return lines
 
 
