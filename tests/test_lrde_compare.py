@@ -115,6 +115,32 @@ def test_effect_comparison_names_hysteresis_and_keeps_the_sinusoid_on_a_clean_lo
     # The point fit recovers the dead band (1/6 step) to a few hundredths of a step.
     w = out["full_fits"]["hysteresis"]["x"][5]
     assert abs(w - 1 / 6) < 0.03
+    # "Not distinguishable" is the paired held-out evidence and nothing else: exactly the
+    # other candidates that beat the sinusoid on each fold and lie within two standard errors.
+    for m in out["models"]:
+        if (m["label"] in ("sinusoid", "hysteresis") or min(m["delta_elpd_halves"]) <= 0
+                or "hysteresis" in m["label"].split("+")):
+            assert m["label"] not in out["indistinguishable"]
+            continue
+        within = abs(m["delta_over_chosen"]) < 2.0 * m["se_over_chosen"]
+        assert within == (m["label"] in out["indistinguishable"])
+
+
+def test_full_log_score_is_the_held_out_score_summed_over_the_log():
+    # Readings are intervals: a point fit whose noise collapses can thread every edge and
+    # reach the plain log-likelihood's ceiling 0 whatever extra terms it has, so the full-log
+    # check uses the held-out score's time blur: the pointwise score over the whole log.
+    from enclab.lrde import effects
+
+    t, c = _effect_log(11)
+    m = fit.map_fit(t, c, STEP)
+    blurred = compare._blurred_log_lik(m, t, c)
+    direct = effects.pointwise_log_likelihood(m["x"][None, :], t, c, STEP, m["centre"],
+                                              m["t_ref"], time_blur=0.125 * m["dt"])[0].sum()
+    assert blurred == pytest.approx(direct, rel=1e-12)
+    plain = effects.pointwise_log_likelihood(m["x"][None, :], t, c, STEP, m["centre"],
+                                             m["t_ref"])[0].sum()
+    assert plain == pytest.approx(m["log_lik"], rel=1e-9)
 
 
 @pytest.mark.slow

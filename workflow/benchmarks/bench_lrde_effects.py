@@ -23,11 +23,17 @@ settings of ``config.yaml`` (``--n-walkers`` etc.). Recorded: the chosen model, 
 term, the predictive check, 90 % intervals of ``A12`` and ``E_b`` before and after (``E_b``
 relative to count 0 in the frame of the longer segment for a jump), convergence and wall time.
 
-Summary per (cycles, case): ``n``; named rate with a Wilson 95 % interval; the detection
-threshold (the size at which a logistic fit of named vs log size crosses 50 %) and the named
-rate among draws of at least 3x that size; coverage of the 90 % intervals before and after;
-the rate of converged, trusted intervals that miss the truth by more than their own width; the
-median wall time.
+A draw's effect is *named* when the chosen model contains its term, and *identified* when it
+is named or the comparison lists its term among the models not distinguishable from the pick
+(the report then says "not distinguishable from ..."); a clean or noise log is identified only
+when the sinusoid stays.
+
+Summary per (cycles, case): ``n``; named and identified rates with Wilson 95 % intervals; the
+detection threshold (the size at which a logistic fit of identified vs log size crosses 50 %)
+and the named and identified rates among draws of at least 3x that size; coverage of the 90 %
+intervals before and after; the rate of converged, trusted intervals that miss the truth by
+more than their own width; the median wall time. A row ``case = all`` per cycle count pools
+every case for the confident-miss rate.
 
 Usage::
 
@@ -138,8 +144,13 @@ def one_draw(case, n_cycles, seed, sampler):
     row["wall_s"] = time.perf_counter() - started
     right = RIGHT[case]
     terms = comp["chosen"].split("+")
+    alternatives = [term for label in comp["indistinguishable"] for term in label.split("+")]
+    named = (comp["chosen"] == "sinusoid") if right is None else (right in terms)
     row |= {"chosen": comp["chosen"], "indistinguishable": "|".join(comp["indistinguishable"]),
-            "named": (comp["chosen"] == "sinusoid") if right is None else (right in terms),
+            "named": named,
+            # The requirement's "identified": named, or named by the report as not
+            # distinguishable from the pick (a clean log has no such allowance).
+            "identified": named or (right is not None and right in alternatives),
             "check_z": comp["check"]["z"], "trusted": comp["check"]["trusted"],
             "before_converged": before.converged, "after_converged": after.converged}
     for label, r in (("before", before), ("after", after)):
@@ -184,17 +195,24 @@ def summarise(draws: pd.DataFrame) -> pd.DataFrame:
     rows = []
     for (cycles, case), g in draws.groupby(["cycles", "case"]):
         g = g[g["chosen"].notna()]
+        if "identified" not in g:
+            g = g.assign(identified=g["named"])
         n = len(g)
         k = int(g["named"].sum())
         lo, hi = wilson(k, n)
+        k_id = int(g["identified"].sum())
+        id_lo, id_hi = wilson(k_id, n)
         row = {"cycles": cycles, "case": case, "n": n, "named_rate": k / n if n else np.nan,
-               "named_ci_lo": lo, "named_ci_hi": hi}
+               "named_ci_lo": lo, "named_ci_hi": hi,
+               "identified_rate": k_id / n if n else np.nan,
+               "identified_ci_lo": id_lo, "identified_ci_hi": id_hi}
         if case in ("hysteresis", "drift", "harmonic"):
-            th = threshold(g["size"], g["named"])
+            th = threshold(g["size"], g["identified"])
             row["threshold"] = th
             big = g[g["size"] >= 3 * th] if np.isfinite(th) else g.iloc[0:0]
             row["n_at_3x"] = len(big)
             row["named_at_3x"] = big["named"].mean() if len(big) else np.nan
+            row["identified_at_3x"] = big["identified"].mean() if len(big) else np.nan
         for label in ("before", "after"):
             for name in ("A12", "E_b"):
                 row[f"{name}_cover_{label}"] = g[f"{name}_{label}_cover"].mean()
@@ -206,6 +224,13 @@ def summarise(draws: pd.DataFrame) -> pd.DataFrame:
         row["confused_with"] = "|".join(sorted(set(g.loc[~g["named"].astype(bool),
                                                          "chosen"])))
         rows.append(row)
+    for cycles, g in draws[draws["chosen"].notna()].groupby("cycles"):
+        # The confident-miss requirement is a rate over all logs, every case pooled.
+        rows.append({"cycles": cycles, "case": "all", "n": len(g),
+                     "confident_miss_rate": (g["A12_after_confident_miss"]
+                                             | g["E_b_after_confident_miss"]).mean(),
+                     "untrusted_rate": (~g["trusted"].astype(bool)).mean(),
+                     "median_wall_s": g["wall_s"].median()})
     return pd.DataFrame(rows)
 
 
@@ -220,6 +245,9 @@ def main(argv=None):
     ap.add_argument("--n-walkers", type=int, default=16)
     ap.add_argument("--n-steps", type=int, default=250)
     ap.add_argument("--n-burn", type=int, default=100)
+    ap.add_argument("--max-steps", type=int, default=1000,
+                    help="as the stage: unconverged chains go on in blocks of --n-steps up "
+                         "to this")
     ap.add_argument("--time-budget", type=float, default=None,
                     help="stop drawing after this many seconds (rows so far are kept)")
     ap.add_argument("--out", default=str(ROOT / "results" / "benchmarks"))
@@ -239,7 +267,7 @@ def main(argv=None):
             print(summary)
         return
     sampler = {"n_ensembles": args.n_ensembles, "n_walkers": args.n_walkers,
-               "n_steps": args.n_steps, "n_burn": args.n_burn}
+               "n_steps": args.n_steps, "n_burn": args.n_burn, "max_steps": args.max_steps}
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     # Interleave cases so that a time budget cuts every case to about the same size.
@@ -247,8 +275,10 @@ def main(argv=None):
     for cycles in args.cycles:
         n_max = max(args.draws, args.clean_draws)
         for i in range(args.first_draw, n_max):
-            for c_i, case in enumerate(args.cases):
+            for case in args.cases:
                 n_case = args.clean_draws if case == "clean" else args.draws
+                # A case's seeds do not depend on which other cases run beside it.
+                c_i = CASES.index(case)
                 if i < n_case:
                     tasks.append((case, cycles, args.seed + 100_000 * c_i + 1000 * cycles + i))
     started = time.perf_counter()

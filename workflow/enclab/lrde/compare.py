@@ -244,6 +244,18 @@ def _predict(m, t, counts, t_train, counts_train):
     return total, lp + (total - lp.sum()) / lp.size
 
 
+def _blurred_log_lik(m, t, counts) -> float:
+    """Full-log log-likelihood of a point fit under the held-out score's time blur.
+
+    Readings are intervals and the position noise of a point fit collapses: a model that
+    threads every reading edge between two samples reaches ``log L = 0`` whatever its extra
+    terms, so the plain maximum saturates and a BIC built on it only counts parameters. The
+    same blur as the held-out score (an eighth of a sample interval) keeps the edges' placement
+    in the score. With a jump term the jump is placed as in :func:`_predict`.
+    """
+    return _predict(m, t, counts, t, counts)[0]
+
+
 def _si_params(m):
     """Simulator arguments of :func:`enclab.lrde.effects.simulate_counts` from a point fit."""
     x, step = m["x"], m["step"]
@@ -309,10 +321,25 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
     ``min_z`` standard errors of the per-cycle differences, it predicts each fold better, and
     its full-log ``delta_bic = 2 (log L_model - log L_sine) - n_extra ln N`` is positive
     (``count_jump`` counts as one extra parameter besides its marginalised location); the
-    largest ``delta_bic`` wins. With ``pairs``, the winner plus the runner-up (largest
-    ``delta_bic`` after it) is tried the same way against the winner. Models whose held-out
-    gain lies within two standard errors of the winner's are reported as not distinguishable
-    from it.
+    largest ``delta_bic`` wins. The full-log likelihoods carry the held-out score's time blur
+    (:func:`_blurred_log_lik`): without it a point fit's position noise collapses, every
+    model that threads the reading edges between samples scores ``log L = 0``, and the BIC
+    difference is only the parameter penalty. With ``pairs``, the winner plus the runner-up
+    (largest ``delta_bic`` after it) is tried the same way against the winner.
+
+    A dead band and a 3rd harmonic are confusable by construction: both move rising and
+    falling edges of one level in opposite directions, the band by ``w/2`` at every level,
+    the harmonic's ``cos 3 phi`` part by an amount that varies with the level, and the
+    fundamental's phase absorbs the common part; on a symmetric three-level pattern the
+    two are equivalent to first order. Against the sinusoid alone a narrow band is mostly a
+    phase lag: what the sinusoid cannot absorb is the band's constant shift against the
+    lag's ``cos phi`` profile over the levels, a tenth of ``w/2`` or less unless the pattern
+    is lopsided or a level grazes a turning point. So every other candidate that predicts each fold
+    better than the sinusoid and whose held-out score lies within two standard errors (paired
+    per-cycle differences) of the pick's is listed in ``indistinguishable``, whether or not
+    it cleared the bar against the sinusoid itself (a model holding the pick's terms and more
+    is not an alternative to it); its ``delta_over_chosen`` and ``se_over_chosen`` hold that
+    evidence.
 
     The chosen model is then checked (:func:`predictive_check`): its log-likelihood at the
     full-log point fit against the distribution of the same score on ``n_sim`` readings
@@ -324,7 +351,8 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
     -------
     dict
         ``models`` (per candidate: ``label, harmonics, effects, elpd_per_cycle, delta_elpd,
-        delta_se, z, delta_elpd_halves, delta_bic``), ``chosen`` (label), ``chosen_harmonics``,
+        delta_se, z, delta_elpd_halves, delta_bic``, and for alternatives to a chosen effect
+        ``delta_over_chosen, se_over_chosen``), ``chosen`` (label), ``chosen_harmonics``,
         ``chosen_effects``, ``indistinguishable`` (labels), ``check`` ``{z, observed,
         sim_mean, sim_sd, trusted}``, ``n_cycles``, ``rule``, ``full_fits`` (label -> point
         fit of the whole log).
@@ -374,6 +402,8 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
             full[label] = lrde_fit.map_fit(t, counts, step, harmonics=harmonics,
                                            effects=effects, start=full["sinusoid"]["x"],
                                            init=init, **fit_kwargs)
+        if "log_lik_blurred" not in full[label]:
+            full[label]["log_lik_blurred"] = _blurred_log_lik(full[label], t, counts)
         return full[label]
 
     def n_extra(harmonics, effects):
@@ -392,9 +422,10 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
                        "delta_elpd_halves": halves_gain, "delta_bic": None})
     passing = [m for m in models[1:] if m["z"] is not None and m["z"] > min_z
                and min(m["delta_elpd_halves"]) > 0]
+    sine_ll = full_fit("sinusoid", (), ())["log_lik_blurred"]
     for m in passing:
         fm = full_fit(m["label"], tuple(m["harmonics"]), tuple(m["effects"]))
-        m["delta_bic"] = float(2.0 * (fm["log_lik"] - full["sinusoid"]["log_lik"])
+        m["delta_bic"] = float(2.0 * (fm["log_lik_blurred"] - sine_ll)
                                - n_extra(m["harmonics"], m["effects"]) * np.log(t.size))
     winners = [m for m in passing if m["delta_bic"] > 0]
     best = max(winners, key=lambda m: m["delta_bic"]) if winners else models[0]
@@ -423,17 +454,28 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
             if entry["z_over"] is not None and entry["z_over"] > min_z and min(halves_gain) > 0:
                 fm = full_fit(label, h, e)
                 fb = full_fit(best["label"], tuple(best["harmonics"]), tuple(best["effects"]))
-                gain = 2.0 * (fm["log_lik"] - fb["log_lik"]) - (
+                gain = 2.0 * (fm["log_lik_blurred"] - fb["log_lik_blurred"]) - (
                     n_extra(h, e) - n_extra(best["harmonics"], best["effects"])) * np.log(t.size)
                 entry["delta_bic"] = float(best["delta_bic"] + gain)
                 if gain > 0 and entry["delta_bic"] > best["delta_bic"]:
                     best = entry
     best_res = results[best["label"]][1]
+    best_terms = set(best["label"].split("+"))
     indistinguishable = []
     for m in models:
-        if m is best or m["label"] == "sinusoid" or m["delta_bic"] is None:
+        # An alternative explanation: it predicts each fold better than the sinusoid too,
+        # and its held-out score is within two standard errors of the pick's. Whether it
+        # also cleared the bar against the sinusoid does not matter here: near the detection
+        # limit the pick clears it by luck as much as by its own signature. A model holding
+        # the pick's terms and more is no alternative: scoring like the pick only says that
+        # its extra term is not needed.
+        if (best["label"] == "sinusoid" or m is best or m["label"] == "sinusoid"
+                or min(m["delta_elpd_halves"]) <= 0
+                or best_terms < set(m["label"].split("+"))):
             continue
         delta, se, _, _ = score(best_res, results[m["label"]][1])
+        m["delta_over_chosen"] = -delta
+        m["se_over_chosen"] = se
         if abs(delta) < 2.0 * se:
             indistinguishable.append(m["label"])
     chosen_fit = full_fit(best["label"], tuple(best["harmonics"]), tuple(best["effects"]))
@@ -448,7 +490,10 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
             "check": check,
             "rule": (f"a model replaces the sinusoid when its held-out gain exceeds {min_z:g} "
                      "standard errors, it predicts each fold better, and its full-log delta BIC "
-                     "is positive (point fits, even/odd cycles as folds, cycles as units); "
+                     "(likelihood with the held-out score's time blur) is positive (point "
+                     "fits, even/odd cycles as folds, cycles as units); other models that "
+                     "predict each fold better than the sinusoid and score within two standard "
+                     "errors of the chosen one are not distinguishable from it; "
                      f"estimates are untrusted when the chosen model's log-likelihood lies "
                      f"more than {-trust_z:g} standard deviations below that of its own "
                      "simulated readings"),
