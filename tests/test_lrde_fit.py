@@ -270,3 +270,27 @@ def test_truth_rounding_bound_holds_the_phase_averaged_error_for_every_bias(ampl
     bound = fit.truth_rounding_bound(amplitude_steps, s)
     assert worst <= bound <= 0.5 * s
     assert bound <= 3.0 * worst
+
+
+@pytest.mark.parametrize("A12_steps, kw, terms", [
+    (3.02, {"hysteresis": 0.136}, {"effects": ("hysteresis",)}),   # readings show A12 - w
+    (4.99, {"noise_std": 0.1}, {}),                                   # noise reads past 5 steps
+    (4.98, {"harmonics": {3: (0.08, 0.0)}}, {"harmonics": (3,)}),     # flattened turning points
+])
+def test_the_stroke_prior_holds_a_stroke_whose_readings_reach_another_count(A12_steps, kw,
+                                                                            terms):
+    """The eq. (6) band around the readings' peak-to-peak count is widened by what each term
+    can do to where the readings turn, so that the truth is inside the prior."""
+    from enclab.lrde import effects
+
+    step = simulate.ROS_DRILL_STEP
+    rng = np.random.default_rng(7)
+    t = np.arange(int(20 * 2000 / 20.0)) / 2000.0
+    scaled = {k: (v * step if k in ("hysteresis", "noise_std") else
+                  {h: (c * step, s * step) for h, (c, s) in v.items()}) for k, v in kw.items()}
+    counts = effects.simulate_counts(rng, t, step, A12_steps * step, 0.5 * step, 20.0, 0.3,
+                                     **scaled)
+    setup = fit._setup(t, counts, step, None, None, "uniform", terms.get("harmonics", ()),
+                       terms.get("effects", ()))
+    lo, hi = setup["bounds"][0]
+    assert lo < A12_steps < hi

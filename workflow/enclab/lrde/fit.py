@@ -23,7 +23,9 @@ both tails keep full relative precision. A bound beyond 8 standard deviations is
 edge cost one ``log_ndtr``, changing the log-likelihood by less than ``1.3e-15`` per sample.
 
 Priors (uniform): ``A12`` in the step-count band ``((K - 1) step, (K + 1) step)`` of the modal
-peak-to-peak count ``K`` (eq. 6 for ``K = 2n``); ``E_b`` in ``(-step, step)`` (the likelihood
+peak-to-peak count ``K`` (eq. 6 for ``K = 2n``), widened by the most that position noise (four
+times the largest jitter), harmonics (their amplitudes) and a dead band (its largest width) can
+move the readings' turning points; ``E_b`` in ``(-step, step)`` (the likelihood
 itself confines it to Proposition 1's band); ``f`` within ``[0.8, 1.25]`` of the initial
 estimate; ``phase`` in ``(-pi, pi]`` around the initial phase; ``sigma`` in
 ``(1e-4, 10**-0.5)`` steps (or ``sigma_range``), uniform in ``sigma`` by default. The
@@ -508,8 +510,15 @@ def _setup(t, counts, step, f_hz, sigma_range, sigma_prior, harmonics, effects,
     K = init["steps_pp"]
     duration = t[-1] - t[0]
     dt = float(np.median(np.diff(t)))
+    # Eq. (6): a noise-free sinusoid read over K steps peak to peak has A12 within one step
+    # of K. Each term that moves where the readings turn widens that band by the most it can:
+    # a dead band hides up to its width of the stroke; harmonics move the turning points by
+    # up to their amplitudes; position noise reads a few sigma beyond them.
+    reach = 2.0 * np.sqrt(2.0) * _HARMONIC_BOUND * len(harmonics)
+    longer = reach + (lrde_effects._HYST_MAX if "hysteresis" in effects else 0.0)
+    shorter = reach + 4.0 * 10.0 ** log_sigma_bounds[1]
     bounds = np.array([
-        [K - 1.0, K + 1.0],
+        [max(K - 1.0 - shorter, 0.05), K + 1.0 + longer],
         [-1.0, 1.0],
         [0.8 * init["f_hz"], 1.25 * init["f_hz"]],
         [init["phase"] - np.pi, init["phase"] + np.pi],
