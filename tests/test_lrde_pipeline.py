@@ -176,37 +176,6 @@ def test_run_summary_names_untrusted_lrde_quantities():
     assert "model hysteresis" in text and f"l: UNTRUSTED A12, E_b: {reason}" in text
 
 
-@pytest.mark.slow
-def test_hysteresis_with_a_truth_channel_is_named_and_a_b_hold_after():
-    """A dead band of 1/8 step read beside a fine truth channel: the comparison names the
-    hysteresis, and with it in the model the offset a and bias b intervals hold the truth."""
-    from enclab.lrde import effects
-
-    rng = np.random.default_rng(31)
-    f_hz, a, b, A12, phase = 20.3, 0.3 * STEP, 0.22 * STEP, 3.7 * STEP, 0.4
-    t = np.arange(int(40 * 2000.0 / f_hz)) / 2000.0
-    counts = effects.simulate_counts(rng, t, STEP, A12, a + b, f_hz, phase,
-                                     noise_std=0.005 * STEP, hysteresis=STEP / 8)
-    theta = b + 0.5 * A12 * np.sin(2 * np.pi * f_hz * t + phase)
-    df = pd.DataFrame({"t": t, "coarse": counts,
-                       "fine": np.floor(theta / (STEP / 100) + 0.5).astype(np.int64)})
-    meta = {"log_id": "sim_hysteresis", "channels": [
-        {"name": "fine", "role": "truth", "joint": 1, "unit": "rad", "storage": "counts",
-         "step": STEP / 100},
-        {"name": "coarse", "role": "measured", "joint": 1, "unit": "rad", "storage": "counts",
-         "step": STEP}]}
-    settings = dict(FAST, motion_models=[[], [3]], effects=["hysteresis", "drift"],
-                    n_steps=150, n_burn=60)
-    block, _, md, _ = pipeline.analyse_lrde_log(df, meta, seed=3, settings=settings)
-    assert block["model"]["chosen"] == "hysteresis"
-    w = block["model"]["params"]["hysteresis"]
-    assert w["q05"] < STEP / 8 < w["q95"]
-    for key, true in (("offset_a", a), ("bias_b", b), ("A12", A12)):
-        assert block["after"][key]["q05"] < true < block["after"][key]["q95"], key
-    assert block["before"]["model"] == "sinusoid" and block["after"]["model"] == "hysteresis"
-    assert "before (sinusoid)" in md and "after (hysteresis)" in md
-
-
 def _hysteresis_log(seed, width, n_cycles=40):
     from enclab.lrde import effects
 
@@ -224,6 +193,23 @@ def _hysteresis_log(seed, width, n_cycles=40):
         {"name": "coarse", "role": "measured", "joint": 1, "unit": "rad", "storage": "counts",
          "step": STEP}]}
     return df, meta, {"offset_a": a, "bias_b": b, "A12": A12}
+
+
+@pytest.mark.slow
+def test_hysteresis_with_a_truth_channel_is_named_and_a_b_hold_after():
+    """A dead band of 1/8 step read beside a fine truth channel: the comparison names the
+    hysteresis, and with it in the model the offset a and bias b intervals hold the truth."""
+    df, meta, true = _hysteresis_log(31, STEP / 8)
+    settings = dict(FAST, motion_models=[[], [3]], effects=["hysteresis", "drift"],
+                    n_steps=150, n_burn=60)
+    block, _, md, _ = pipeline.analyse_lrde_log(df, meta, seed=3, settings=settings)
+    assert block["model"]["chosen"] == "hysteresis"
+    w = block["model"]["params"]["hysteresis"]
+    assert w["q05"] < STEP / 8 < w["q95"]
+    for key, value in true.items():
+        assert block["after"][key]["q05"] < value < block["after"][key]["q95"], key
+    assert block["before"]["model"] == "sinusoid" and block["after"]["model"] == "hysteresis"
+    assert "before (sinusoid)" in md and "after (hysteresis)" in md
 
 
 def test_reference_terms_are_confirmed_or_named_as_standing_for_the_motion():

@@ -269,9 +269,8 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
             model_block = report.effect_model_block(comparison, chosen_fit,
                                                     duration_s=float(t[-1] - t[0]), jump=jump)
         else:
-            model_block = dict(model_block, harmonics=[], signature={},
-                               params=report.effect_params(chosen_fit, float(t[-1] - t[0]),
-                                                           jump))
+            model_block = dict(model_block, params=report.effect_params(
+                chosen_fit, float(t[-1] - t[0]), jump))
         if added:
             model_block["effects"] = list(chosen) + added
             model_block["signature"] = {e: lrde_effects.effect_signature(e)
