@@ -44,6 +44,12 @@ def main(argv=None) -> None:
     args = ap.parse_args(argv)
     import enclab
     from enclab.core import ingest, readers
+    try:
+        from enclab.core.allocator import keep_freed_memory
+    except ImportError:  # older versions of the package
+        pass
+    else:
+        keep_freed_memory()  # as the rule's job process does (enclab.runner.run)
     from enclab.lrde.pipeline import analyse_lrde_log
 
     config = yaml.safe_load(pathlib.Path(args.config).read_text())

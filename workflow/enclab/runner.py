@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from enclab.core import atomic
+from enclab.core.allocator import keep_freed_memory
 from enclab.core.errors import EnclabInputError
 from enclab.progress import QUIET_JOBS_ENV
 
@@ -55,6 +56,7 @@ def run(smk: Any, main: Callable[[Any], None]) -> None:
     progress display of ``make run`` (:data:`enclab.progress.QUIET_JOBS_ENV`), which prints the
     failed job's line itself.
     """
+    keep_freed_memory()
     path = _log_path(smk)
     quiet = bool(path) and bool(os.environ.get(QUIET_JOBS_ENV))
     handlers: list[logging.Handler] = [] if quiet else [logging.StreamHandler(sys.stderr)]
@@ -109,6 +111,7 @@ def run_chunk(entries: Iterable[Mapping], process: Callable[[Mapping, Path], Non
     dict
         ``{log_id: None}`` for a log that completed, ``{log_id: error line}`` otherwise.
     """
+    keep_freed_memory()
     staging = Path(staging)
     staging.mkdir(parents=True, exist_ok=True)
     logger = logging.getLogger(f"enclab.{rule}")
