@@ -40,6 +40,7 @@ Usage::
     python workflow/benchmarks/bench_lrde_effects.py --draws 100 --clean-draws 200 \\
         --cycles 20 100
     python workflow/benchmarks/bench_lrde_effects.py --draws 10 --clean-draws 20 --cycles 20
+    python workflow/benchmarks/bench_lrde_effects.py --cycles 20 --shard 1/2   # half of a run
 
 Writes ``<out>/lrde_effects_draws.csv`` and ``<out>/lrde_effects_summary.csv``.
 """
@@ -57,6 +58,7 @@ from scipy.optimize import minimize
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 from provenance import ROOT, stamp  # noqa: E402
 
+from enclab.core.allocator import keep_freed_memory  # noqa: E402
 from enclab.lrde import compare, effects, fit, model, simulate  # noqa: E402
 
 STEP = simulate.ROS_DRILL_STEP
@@ -255,7 +257,11 @@ def main(argv=None):
                     help="only summarise existing lrde_effects_draws.csv files (concatenated)")
     ap.add_argument("--first-draw", type=int, default=0,
                     help="index of the first draw per case (continue an earlier run)")
+    ap.add_argument("--shard", default="0/1", metavar="K/N",
+                    help="run only the draws whose index is K modulo N: N processes with "
+                         "K = 0..N-1 share one run; merge their CSVs with --from-draws")
     args = ap.parse_args(argv)
+    keep_freed_memory()  # as the stage's job process does (enclab.runner.run)
     if args.from_draws:
         out = pathlib.Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
@@ -270,6 +276,9 @@ def main(argv=None):
                "n_steps": args.n_steps, "n_burn": args.n_burn, "max_steps": args.max_steps}
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    k, n = (int(x) for x in args.shard.split("/"))
+    if not 0 <= k < n:
+        ap.error(f"--shard {args.shard}: K must be in 0..N-1")
     # Interleave cases so that a time budget cuts every case to about the same size.
     tasks = []
     for cycles in args.cycles:
@@ -279,7 +288,7 @@ def main(argv=None):
                 n_case = args.clean_draws if case == "clean" else args.draws
                 # A case's seeds do not depend on which other cases run beside it.
                 c_i = CASES.index(case)
-                if i < n_case:
+                if i < n_case and i % n == k:
                     tasks.append((case, cycles, args.seed + 100_000 * c_i + 1000 * cycles + i))
     started = time.perf_counter()
     rows = []
