@@ -74,6 +74,11 @@ class MapBasis:
         ``(lo, hi)`` of that grid (default the whole range). The ends of a stroke are where a
         motion reverses and where the data say least about the map; the scale is better
         defined as the slope over the well-covered middle.
+    extrapolate : {"hold", "linear"}
+        Beyond ``[lo, hi]``: the map held at its end values (``"hold"``: an angle map), or
+        continued along its end slopes (``"linear"``: a torque map, whose slope at the end of
+        the range is a stiffness that holds beyond it, while the linear part removed on the
+        grid is only the mean slope over the range).
     """
 
     lo: float
@@ -81,6 +86,7 @@ class MapBasis:
     spacing: float
     n_grid: int = 2001
     ref: tuple | None = None
+    extrapolate: str = "hold"
 
     def __post_init__(self):
         if not (np.isfinite(self.lo) and np.isfinite(self.hi) and self.hi > self.lo):
@@ -89,6 +95,8 @@ class MapBasis:
             raise ValueError(f"map reference range {self.ref!r} must lie inside [{self.lo!r}, {self.hi!r}]")
         if not (np.isfinite(self.spacing) and self.spacing > 0):
             raise ValueError(f"knot spacing must be positive, got spacing={self.spacing!r}")
+        if self.extrapolate not in ("hold", "linear"):
+            raise ValueError(f"map extrapolation {self.extrapolate!r}: expected 'hold' or 'linear'")
 
     @property
     def knots(self) -> np.ndarray:
@@ -123,6 +131,13 @@ class MapBasis:
         a = np.asarray(a, dtype=np.float64)
         ac = np.clip(a, self.lo, self.hi)
         raw = self._raw(ac)
+        if self.extrapolate == "linear":
+            # B-splines of a clamped knot vector: the end slopes are those of the end pieces
+            h = 1e-6 * (self.hi - self.lo)
+            d_lo = (self._raw([self.lo + h]) - self._raw([self.lo])) / h
+            d_hi = (self._raw([self.hi]) - self._raw([self.hi - h])) / h
+            raw = raw + np.minimum(a - self.lo, 0.0)[:, None] * d_lo + np.maximum(a - self.hi, 0.0)[:, None] * d_hi
+            ac = a
         return (raw - np.column_stack([np.ones_like(ac), ac]) @ coef) @ rot
 
     def curve(self, coef, a) -> np.ndarray:
