@@ -28,6 +28,18 @@ loads extrapolates to high loads as a constant. *Signature*: a residual inside t
 of magnitude up to half the play, where the torque is small, largest at the load that balances
 the friction.
 
+**Torque map** (a :class:`MapBasis` on a torque, ``extrapolate="linear"``; built by
+:func:`enclab.residuals.rig.torque_map_basis`): the take-up curve of the transmission as a
+spline of the torque it carries, beside the ``linear`` term. A gear with backlash rests on the
+side its torque pushes it to: where the torque stays near zero during a stroke (a load that
+nearly balances the friction) the output floats partway across the play, a twist that a play
+operator (a function of the travel since a reversal) does not give. Every run crosses zero
+torque at its reversals, so runs at low loads carry the curve near zero that runs at high
+loads need inside their strokes. Beyond the range it is fitted on it continues along its end
+slopes (the stiffness once the play is taken up). *Signature*: at a load whose torque stays
+near zero into a stroke, a residual of up to half the play that decays as the torque grows,
+the same function of the torque in every run.
+
 Every function is pure: arrays in, arrays out.
 """
 from __future__ import annotations

@@ -16,7 +16,10 @@ the rig, ``RigSpec(latency="shared")``); and **shared**
 effects (one value for the rig, fitted on training runs only and applied unchanged to held-out
 runs): the scale ``s``, the calibration map ``m`` of the measured-side angle ``a`` (the reading
 itself; :class:`enclab.residuals.calibration.MapBasis`) and the compliance coefficients
-``kappa`` against one or more logged torques (:func:`enclab.residuals.calibration.compliance_columns`).
+``kappa`` against one or more logged torques (:func:`enclab.residuals.calibration.compliance_columns`),
+optionally with a torque map (``RigSpec(torque_map=...)``: a spline of a torque, the take-up
+curve of the transmission, on the torque range every group of training runs covers,
+:func:`torque_range`).
 
 Fit: given the play widths, the model is linear; the per-run offset and latency are projected
 out run by run (Frisch-Waugh), so the shared coefficients solve one small normal-equation system
@@ -39,7 +42,8 @@ value out) and leave-one-run-out.
 Choices made on held-out data (:func:`choose_model`), on each fold's training runs alone with
 groups of them held out in turn (:func:`inner_groups`: by the fold's condition): the knot
 spacing, and the model form (:func:`takeup_variants`: the declared compliance or the play
-take-up ``tanh(T / T0)`` in place of ``T|T|``, with or without the reversal transient). An
+take-up ``tanh(T / T0)`` in place of ``T|T|``, with or without the reversal transient) and
+the number of intervals of a torque map (on every sample, as the knot spacing). An
 input-side calibration map (harmonics of ``gear_ratio * truth``) is available when a gear ratio
 is declared (``RigSpec(gear_ratio=..., input_harmonics=...)``).
 """
