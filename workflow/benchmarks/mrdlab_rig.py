@@ -104,6 +104,32 @@ def _form(spec: rig.RigSpec) -> str:
             f"transient {spec.transient or 'none'}")
 
 
+def torque_curve_spread(folds_out, n: int = 101) -> dict:
+    """Per torque map: the twist against the torque alone (linear term plus map, its mean
+    removed) of each fold on the torque range all folds' maps share; ``span`` (rad) of their
+    mean curve and ``rel_dev``, the largest deviation of a fold's curve from it over that span.
+    A map's linear coefficient is its mean slope over its own range, so it is no parameter to
+    compare across folds; the curve is."""
+    maps = [f["fit"] for f in folds_out if f["fit"].spec.torque_map]
+    out = {}
+    for channel in sorted({c for fit in maps for c in fit.spec.torque_map}):
+        fits = [fit for fit in maps if channel in fit.spec.torque_map]
+        lo = max(fit.spec.torque_map[channel][0] for fit in fits)
+        hi = min(fit.spec.torque_map[channel][1] for fit in fits)
+        if len(fits) < 2 or not hi > lo:
+            continue
+        T = np.linspace(lo, hi, n)
+        curves = []
+        for fit in fits:
+            c = fit.shared().get(f"{channel}:linear", 0.0) * T + fit.torque_map_curve(channel, T)
+            curves.append(c - c.mean())
+        curves = np.array(curves)
+        mean = curves.mean(axis=0)
+        span = float(np.ptp(mean))
+        out[channel] = {"span": span, "rel_dev": float(np.max(np.abs(curves - mean)) / span)}
+    return out
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--models", nargs="+", default=list(MODELS), choices=list(MODELS))
@@ -182,6 +208,12 @@ def main(argv=None) -> int:
                                "ci_lo": ci.get(name, (None, None))[0], "ci_hi": ci.get(name, (None, None))[1],
                                "spread_over_condition_folds": spread.get(name, {}).get("rel_dev"),
                                "spread_over_loro_folds": loro_spread.get(name, {}).get("rel_dev")})
+        for group in ([cond_folds, "spread_over_condition_folds"],
+                      [[f for f in out if f["split"] == "runs"], "spread_over_loro_folds"]):
+            for channel, c in torque_curve_spread(group[0]).items():
+                params.append({"model": model, "split": "all folds", "fold": "", "spacing": None, "form": "",
+                               "parameter": f"{channel}:twist_curve", "value": c["span"],
+                               "ci_lo": None, "ci_hi": None, group[1]: c["rel_dev"]})
         print(f"{model}: {seconds:.0f} s", file=sys.stderr)
         for f in out:
             print(f"  fold {f['fold']}: spacing {f['spacing']}, {_form(f['fit'].spec)}; variant scores "
