@@ -31,7 +31,9 @@ of them, every k-th run held out) for the spread of the shared parameters.
 
 Writes ``results/benchmarks/mrdlab_rig.csv`` (held-out residual std per model, split and
 condition, with the targets) and ``results/benchmarks/mrdlab_rig_params.csv`` (the shared
-parameters of each fold and their spread), and copies both to ``--copy-to`` when given.
+parameters of each fold and their spread; for a torque map, ``<channel>:twist_curve``: the span
+of the twist against that torque on the range the folds' maps share, and the largest deviation of
+a fold's curve from their mean relative to it), and copies both to ``--copy-to`` when given.
 
 Usage (from the repository root; needs ../shared/data/real)::
 
