@@ -78,6 +78,23 @@ def test_map_basis_rejects_bad_ranges():
         cal.MapBasis(0.0, 1.0, 0.1, ref=(-0.1, 0.5))
 
 
+def test_map_basis_continues_along_its_end_slopes():
+    b = cal.MapBasis(-1.0, 2.0, 0.5, extrapolate="linear")
+    held = cal.MapBasis(-1.0, 2.0, 0.5)
+    inside = np.linspace(-1.0, 2.0, 31)
+    assert np.allclose(b.design(inside), held.design(inside))
+    for end, out in ((-1.0, np.array([-1.0, -1.5, -2.0, -3.0])), (2.0, np.array([2.0, 2.5, 3.0, 4.0]))):
+        D = b.design(out)
+        slope = (D[1] - D[0]) / (out[1] - out[0])
+        # linear beyond the end, with the slope of the spline at the end (one-sided difference)
+        assert np.allclose(D, D[0] + np.outer(out - end, slope), atol=1e-9)
+        near = end - 1e-6 * np.sign(end - 0.5)
+        fd = (held.design([end])[0] - held.design([near])[0]) / (end - near)
+        assert np.allclose(fd, slope, rtol=1e-4, atol=1e-4)
+    with pytest.raises(ValueError, match="extrapolation"):
+        cal.MapBasis(0.0, 1.0, 0.1, extrapolate="cubic")
+
+
 def test_compliance_columns_and_curve():
     T = np.array([-0.1, 0.0, 0.05])
     cols = cal.compliance_columns({"tb": ["linear", "signed_square"]}, {"tb": T})
@@ -457,3 +474,50 @@ def test_rig_report_shows_the_input_side_map():
     assert all(lo <= c <= hi for c, lo, hi in zip(block["curve"], block["band_lo"], block["band_hi"]))
     assert len(out["figures"]["map"].axes) == 2
     assert "input-side map (2 harmonics" in out["markdown"]
+
+
+# ----------------------------------------------------------------------------- torque map
+
+
+def test_torque_range_is_the_range_every_group_covers():
+    t = np.arange(2001) / 1000.0
+    runs = [rig.Run(f"r{i}", t, t, t, STEP, torques={"tb": np.linspace(lo, lo + 0.1, t.size)},
+                    conditions={"load": lo}) for i, lo in enumerate((0.0, 0.03))]
+    groups = {"r0": "a", "r1": "b"}
+    lo, hi = rig.torque_range(runs, "tb", groups, q=0.0)
+    assert (lo, hi) == (pytest.approx(0.03), pytest.approx(0.1))
+    # each run its own group by default; quantiles trim the ends
+    lo, hi = rig.torque_range(runs, "tb", q=0.1)
+    assert (lo, hi) == (pytest.approx(0.03 + 0.01), pytest.approx(0.1 - 0.01))
+    far = [runs[0], rig.Run("r2", t, t, t, STEP, torques={"tb": np.linspace(0.5, 0.6, t.size)})]
+    with pytest.raises(ValueError, match="share no range"):
+        rig.torque_range(far, "tb")
+    spec = rig.resolve_torque_map(runs, rig.RigSpec(torque_map={"tb": 8}, t_skip=0.0), groups)
+    assert spec.torque_map["tb"][2] == 8 and spec.torque_map["tb"][0] > 0.03
+    with pytest.raises(ValueError, match="no range"):
+        rig._shared_columns(runs[0], rig.RigSpec(torque_map={"tb": 8}, scale=False), None, 0.0)
+
+
+def test_torque_map_recovers_the_takeup_curve(takeup_rig):
+    # The take-up 0.004 tanh(T/0.01) is no polynomial: a spline of the torque (linear part = the
+    # linear compliance) follows it; its resolution is chosen on held-out training runs.
+    spec = rig.RigSpec(spacing=None, compliance={"torque_back": ["linear"], "torque_front": ["linear"]},
+                       torque_map={"torque_back": 8})
+    folds = rig.make_folds(takeup_rig, [{"name": "f", "by": "frequency_hz", "train": [0.5, 0.75],
+                                         "test": [1.0]}])
+    rows, out = rig.evaluate(takeup_rig, spec, folds, torque_knots=[4, 16])
+    poly, _ = rig.evaluate(takeup_rig, spec.with_(compliance=SPEC_COMP, torque_map={}), folds)
+    fit = out[0]["fit"]
+    lo, hi, n = fit.spec.torque_map["torque_back"]
+    # 4 intervals over ~0.14 N m cannot bend over 0.01 N m: the finer map is chosen
+    assert n == 16 and set(out[0]["spacing_scores"]["torque_knots"]) == {4, 16}
+    T = np.linspace(lo, hi, 201)
+    curve = fit.shared()["torque_back:linear"] * T + fit.torque_map_curve("torque_back", T)
+    true = 0.02 * T + 0.004 * np.tanh(T / 0.01)
+    dev = (curve - true) - np.mean(curve - true)  # the constant is each run's offset
+    floor = rig.floor_std(STEP, TRUTH_STEP)
+    # the curve rests on ~24000 samples whose error is ``floor``: it is off by far less
+    assert np.max(np.abs(dev)) < 0.5 * floor
+    assert fit.shared()["torque_front:linear"] == pytest.approx(-0.2, rel=0.05)
+    after, before = rig.pooled(rows)["steady_std"], rig.pooled(poly)["steady_std"]
+    assert after < 1.2 * floor < before

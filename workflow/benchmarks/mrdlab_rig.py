@@ -16,7 +16,14 @@ scored on held-out runs:
   training runs: the back torque's ``T|T|`` kept or replaced by the play take-up ``tanh(T/T0)``
   (``T0`` = 0.1, 0.2, 0.4 or 0.8 times the torque's std), the reversal transient kept or left
   out; chosen on the steady strokes of one training condition value held out at a time, then the
-  knot spacing the same way.
+  knot spacing the same way;
+- ``rig+torquemap``: the ``rig`` model with the back torque's ``T|T|`` replaced by its torque map,
+  the take-up curve of the transmission (a spline of the back torque, constant and linear parts
+  removed, over the torque range every training condition covers, continued along its end
+  slopes beyond): its number of intervals (4, 8 or 16) chosen per fold on the training runs, one
+  condition value held out at a time, on every sample, then the knot spacing the same way. The
+  gear's side of its play follows the torque it carries, not only the travel since a reversal:
+  at a load that nearly balances the friction the torque stays near zero well into a stroke.
 
 Splits: frequency (train 0.1/0.3/0.5 Hz, test 0.2/0.4 Hz) and load (train 10/20 %, test 30/40 %);
 ``--loro`` runs leave-one-run-out folds instead (knot spacing fixed at 0.05 rad, ``--loro-max``
@@ -24,7 +31,9 @@ of them, every k-th run held out) for the spread of the shared parameters.
 
 Writes ``results/benchmarks/mrdlab_rig.csv`` (held-out residual std per model, split and
 condition, with the targets) and ``results/benchmarks/mrdlab_rig_params.csv`` (the shared
-parameters of each fold and their spread), and copies both to ``--copy-to`` when given.
+parameters of each fold and their spread; for a torque map, ``<channel>:twist_curve``: the span
+of the twist against that torque on the range the folds' maps share, and the largest deviation of
+a fold's curve from their mean relative to it), and copies both to ``--copy-to`` when given.
 
 Usage (from the repository root; needs ../shared/data/real)::
 
@@ -54,6 +63,7 @@ ROOT = Path(__file__).resolve().parents[2]
 RIG = "mrdlab_tool4"
 COMP = {"torque_back": ["linear", "signed_square"], "torque_front": ["linear"]}
 SPACINGS = [0.2, 0.1, 0.07, 0.05, 0.035]
+TORQUE_KNOTS = [4, 8, 16]
 MODELS = {
     "play+scale": (rig.RigSpec(spacing=None, latency=False), None),
     "+map": (rig.RigSpec(spacing=0.05, latency=False), None),
@@ -62,6 +72,9 @@ MODELS = {
     "rig, per-run latency": (rig.RigSpec(spacing=0.05, compliance=COMP, transient=0.004), SPACINGS),
     "rig+takeup": (rig.RigSpec(spacing=0.05, compliance=COMP, latency="shared", transient=0.004), SPACINGS,
                    "takeup"),
+    "rig+torquemap": (rig.RigSpec(spacing=0.05, compliance={"torque_back": ["linear"], "torque_front": ["linear"]},
+                                  torque_map={"torque_back": 8}, latency="shared", transient=0.004), SPACINGS,
+                      None, TORQUE_KNOTS),
 }
 # Done-when targets (steady, all) in rad and the independent study's reference for the full model
 TARGETS = {"frequency": (0.55e-3, 1.20e-3), "load": (0.70e-3, 1.45e-3)}
@@ -87,7 +100,36 @@ def _form(spec: rig.RigSpec) -> str:
     """The compliance terms, torque scales and transient a fold chose, in words."""
     terms = "; ".join(f"{c}: {'+'.join(t)}" for c, t in spec.compliance.items())
     scales = ", ".join(f"{c} T0={v:.3g} N m" for c, v in spec.torque_scales.items())
-    return f"{terms}{'; ' + scales if scales else ''}; transient {spec.transient or 'none'}"
+    tmap = ", ".join(f"{c} torque map {v[2]} intervals on [{v[0]:.3g}, {v[1]:.3g}] N m"
+                     for c, v in spec.torque_map.items())
+    return (f"{terms}{'; ' + scales if scales else ''}{'; ' + tmap if tmap else ''}; "
+            f"transient {spec.transient or 'none'}")
+
+
+def torque_curve_spread(folds_out, n: int = 101) -> dict:
+    """Per torque map: the twist against the torque alone (linear term plus map, its mean
+    removed) of each fold on the torque range all folds' maps share; ``span`` (rad) of their
+    mean curve and ``rel_dev``, the largest deviation of a fold's curve from it over that span.
+    A map's linear coefficient is its mean slope over its own range, so it is no parameter to
+    compare across folds; the curve is."""
+    maps = [f["fit"] for f in folds_out if f["fit"].spec.torque_map]
+    out = {}
+    for channel in sorted({c for fit in maps for c in fit.spec.torque_map}):
+        fits = [fit for fit in maps if channel in fit.spec.torque_map]
+        lo = max(fit.spec.torque_map[channel][0] for fit in fits)
+        hi = min(fit.spec.torque_map[channel][1] for fit in fits)
+        if len(fits) < 2 or not hi > lo:
+            continue
+        T = np.linspace(lo, hi, n)
+        curves = []
+        for fit in fits:
+            c = fit.shared().get(f"{channel}:linear", 0.0) * T + fit.torque_map_curve(channel, T)
+            curves.append(c - c.mean())
+        curves = np.array(curves)
+        mean = curves.mean(axis=0)
+        span = float(np.ptp(mean))
+        out[channel] = {"span": span, "rel_dev": float(np.max(np.abs(curves - mean)) / span)}
+    return out
 
 
 def main(argv=None) -> int:
@@ -106,18 +148,20 @@ def main(argv=None) -> int:
     runs, splits = load_runs()
     rows, params = [], []
     for model in args.models:
-        spec, spacings, *variants = MODELS[model]
-        variants = variants[0] if variants else None
+        spec, spacings, *extra = MODELS[model]
+        variants = extra[0] if extra else None
+        knots = extra[1] if len(extra) > 1 else None
         start = time.perf_counter()
         if args.loro:
             # Leave-one-run-out folds only, the knot spacing fixed (0.05 rad), every k-th run held
             # out (--loro-max folds): the spread of the shared parameters over many training sets.
             folds = rig.make_folds(runs, [{"name": "runs", "leave_one_run_out": True}])
             folds = folds[::max(len(folds) // args.loro_max, 1)][:args.loro_max]
-            res, out = rig.evaluate(runs, spec, folds, None, keep_residuals=True, variants=variants)
+            res, out = rig.evaluate(runs, spec, folds, None, keep_residuals=True, variants=variants,
+                                    torque_knots=knots)
         else:
             res, out = rig.evaluate(runs, spec, rig.make_folds(runs, splits), spacings, keep_residuals=True,
-                                    variants=variants)
+                                    variants=variants, torque_knots=knots)
         seconds = time.perf_counter() - start
         table = split_table(res)
         for _, r in table.iterrows():
@@ -166,6 +210,12 @@ def main(argv=None) -> int:
                                "ci_lo": ci.get(name, (None, None))[0], "ci_hi": ci.get(name, (None, None))[1],
                                "spread_over_condition_folds": spread.get(name, {}).get("rel_dev"),
                                "spread_over_loro_folds": loro_spread.get(name, {}).get("rel_dev")})
+        for group in ([cond_folds, "spread_over_condition_folds"],
+                      [[f for f in out if f["split"] == "runs"], "spread_over_loro_folds"]):
+            for channel, c in torque_curve_spread(group[0]).items():
+                params.append({"model": model, "split": "all folds", "fold": "", "spacing": None, "form": "",
+                               "parameter": f"{channel}:twist_curve", "value": c["span"],
+                               "ci_lo": None, "ci_hi": None, group[1]: c["rel_dev"]})
         print(f"{model}: {seconds:.0f} s", file=sys.stderr)
         for f in out:
             print(f"  fold {f['fold']}: spacing {f['spacing']}, {_form(f['fit'].spec)}; variant scores "

@@ -28,6 +28,18 @@ loads extrapolates to high loads as a constant. *Signature*: a residual inside t
 of magnitude up to half the play, where the torque is small, largest at the load that balances
 the friction.
 
+**Torque map** (a :class:`MapBasis` on a torque, ``extrapolate="linear"``; built by
+:func:`enclab.residuals.rig.torque_map_basis`): the take-up curve of the transmission as a
+spline of the torque it carries, beside the ``linear`` term. A gear with backlash rests on the
+side its torque pushes it to: where the torque stays near zero during a stroke (a load that
+nearly balances the friction) the output floats partway across the play, a twist that a play
+operator (a function of the travel since a reversal) does not give. Every run crosses zero
+torque at its reversals, so runs at low loads carry the curve near zero that runs at high
+loads need inside their strokes. Beyond the range it is fitted on it continues along its end
+slopes (the stiffness once the play is taken up). *Signature*: at a load whose torque stays
+near zero into a stroke, a residual of up to half the play that decays as the torque grows,
+the same function of the torque in every run.
+
 Every function is pure: arrays in, arrays out.
 """
 from __future__ import annotations
@@ -74,6 +86,11 @@ class MapBasis:
         ``(lo, hi)`` of that grid (default the whole range). The ends of a stroke are where a
         motion reverses and where the data say least about the map; the scale is better
         defined as the slope over the well-covered middle.
+    extrapolate : {"hold", "linear"}
+        Beyond ``[lo, hi]``: the map held at its end values (``"hold"``: an angle map), or
+        continued along its end slopes (``"linear"``: a torque map, whose slope at the end of
+        the range is a stiffness that holds beyond it, while the linear part removed on the
+        grid is only the mean slope over the range).
     """
 
     lo: float
@@ -81,6 +98,7 @@ class MapBasis:
     spacing: float
     n_grid: int = 2001
     ref: tuple | None = None
+    extrapolate: str = "hold"
 
     def __post_init__(self):
         if not (np.isfinite(self.lo) and np.isfinite(self.hi) and self.hi > self.lo):
@@ -89,6 +107,8 @@ class MapBasis:
             raise ValueError(f"map reference range {self.ref!r} must lie inside [{self.lo!r}, {self.hi!r}]")
         if not (np.isfinite(self.spacing) and self.spacing > 0):
             raise ValueError(f"knot spacing must be positive, got spacing={self.spacing!r}")
+        if self.extrapolate not in ("hold", "linear"):
+            raise ValueError(f"map extrapolation {self.extrapolate!r}: expected 'hold' or 'linear'")
 
     @property
     def knots(self) -> np.ndarray:
@@ -123,6 +143,13 @@ class MapBasis:
         a = np.asarray(a, dtype=np.float64)
         ac = np.clip(a, self.lo, self.hi)
         raw = self._raw(ac)
+        if self.extrapolate == "linear":
+            # B-splines of a clamped knot vector: the end slopes are those of the end pieces
+            h = 1e-6 * (self.hi - self.lo)
+            d_lo = (self._raw([self.lo + h]) - self._raw([self.lo])) / h
+            d_hi = (self._raw([self.hi]) - self._raw([self.hi - h])) / h
+            raw = raw + np.minimum(a - self.lo, 0.0)[:, None] * d_lo + np.maximum(a - self.hi, 0.0)[:, None] * d_hi
+            ac = a
         return (raw - np.column_stack([np.ones_like(ac), ac]) @ coef) @ rot
 
     def curve(self, coef, a) -> np.ndarray:

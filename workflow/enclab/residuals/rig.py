@@ -16,7 +16,10 @@ the rig, ``RigSpec(latency="shared")``); and **shared**
 effects (one value for the rig, fitted on training runs only and applied unchanged to held-out
 runs): the scale ``s``, the calibration map ``m`` of the measured-side angle ``a`` (the reading
 itself; :class:`enclab.residuals.calibration.MapBasis`) and the compliance coefficients
-``kappa`` against one or more logged torques (:func:`enclab.residuals.calibration.compliance_columns`).
+``kappa`` against one or more logged torques (:func:`enclab.residuals.calibration.compliance_columns`),
+optionally with a torque map (``RigSpec(torque_map=...)``: a spline of a torque, the take-up
+curve of the transmission, on the torque range every group of training runs covers,
+:func:`torque_range`).
 
 Fit: given the play widths, the model is linear; the per-run offset and latency are projected
 out run by run (Frisch-Waugh), so the shared coefficients solve one small normal-equation system
@@ -39,7 +42,8 @@ value out) and leave-one-run-out.
 Choices made on held-out data (:func:`choose_model`), on each fold's training runs alone with
 groups of them held out in turn (:func:`inner_groups`: by the fold's condition): the knot
 spacing, and the model form (:func:`takeup_variants`: the declared compliance or the play
-take-up ``tanh(T / T0)`` in place of ``T|T|``, with or without the reversal transient). An
+take-up ``tanh(T / T0)`` in place of ``T|T|``, with or without the reversal transient) and
+the number of intervals of a torque map (on every sample, as the knot spacing). An
 input-side calibration map (harmonics of ``gear_ratio * truth``) is available when a gear ratio
 is declared (``RigSpec(gear_ratio=..., input_harmonics=...)``).
 """
@@ -56,7 +60,8 @@ from enclab.residuals.effects import motion_sign, play_operator
 
 __all__ = ["Run", "RigSpec", "RigFit", "steady_mask", "fit_rig", "predict_run", "score_run",
            "choose_spacing", "choose_variant", "input_columns", "choose_model", "takeup_variants", "heldout_rms",
-           "inner_groups", "make_folds", "evaluate", "pooled", "fold_spread", "floor_std", "map_range",
+           "inner_groups", "make_folds", "torque_map_basis", "torque_range", "resolve_torque_map",
+           "evaluate", "pooled", "fold_spread", "floor_std", "map_range",
            "run_from_canonical"]
 
 
@@ -107,6 +112,12 @@ class RigSpec:
         empty = none.
     torque_scales : dict
         ``{torque channel: T0}`` (N m) of the ``saturating`` terms (play take-up ``tanh(T / T0)``).
+    torque_map : dict
+        ``{torque channel: n}`` or ``{torque channel: (lo, hi, n)}``: the take-up curve of the
+        transmission, a shared cubic spline of the torque with ``n`` equal intervals over
+        ``[lo, hi]`` (N m), its constant and linear parts removed (the linear part is the
+        ``linear`` compliance term), continued along its end slopes outside the range. Without a range
+        it is resolved on the training runs (:func:`resolve_torque_map`).
     max_play : float
         Upper bound of the play width (rad).
     transient : float or None
@@ -135,6 +146,7 @@ class RigSpec:
     spacing: float | None = 0.05
     compliance: Mapping = field(default_factory=dict)
     torque_scales: Mapping = field(default_factory=dict)
+    torque_map: Mapping = field(default_factory=dict)
     max_play: float = 0.08
     transient: float | None = None
     gear_ratio: float | None = None
@@ -149,7 +161,7 @@ class RigSpec:
         return RigSpec(**d)
 
 
-_CURVES = ("map", "transient", "input")
+_CURVES = ("map", "transient", "input", "tmap")
 
 
 @dataclass
@@ -199,6 +211,16 @@ class RigFit:
             return curve, curve, curve
         sd = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", D, self.cov[np.ix_(idx, idx)], D), 0.0))
         return curve, curve - z * sd, curve + z * sd
+
+    def torque_map_curve(self, channel: str, torque) -> np.ndarray:
+        """The torque map of ``channel`` at ``torque`` (N m): the twist (rad) it adds to the
+        linear compliance; zeros without one."""
+        torque = np.asarray(torque, dtype=np.float64)
+        rng = self.spec.torque_map.get(channel)
+        if rng is None:
+            return np.zeros_like(torque)
+        idx = [i for i, n in enumerate(self.names) if n.startswith(f"tmap_{channel}")]
+        return torque_map_basis(*rng).design(torque) @ self.coef[idx]
 
     def map_curve(self, a, z: float = 1.6449):
         """The calibration map at ``a``: ``(curve, lo, hi)`` with a 90 % jackknife band (the
@@ -290,6 +312,54 @@ def transient_columns(truth, spacing: float, travel: float) -> np.ndarray:
     return B[:, :-2] * direction[:, None]
 
 
+def torque_map_basis(lo: float, hi: float, n: int) -> MapBasis:
+    """Basis of a torque map: cubic B-splines with ``n`` equal intervals over ``[lo, hi]``
+    (N m), constant and linear parts removed, continued along its end slopes beyond the range
+    (:class:`MapBasis` on the torque)."""
+    n = int(n)
+    if n < 1:
+        raise ValueError(f"a torque map needs at least 1 interval, got {n}")
+    return MapBasis(float(lo), float(hi), (float(hi) - float(lo)) / n, extrapolate="linear")
+
+
+def torque_range(runs: Sequence[Run], channel: str, groups: Mapping | None = None,
+                 t_skip: float = 0.0, q: float = 0.005) -> tuple[float, float]:
+    """Range of a torque (N m) that every group of ``runs`` covers: the largest of the groups'
+    ``q`` quantiles to the smallest of their ``1 - q`` quantiles (samples after ``t_skip``).
+
+    A torque map is a spline: beyond the torques a fit sees it is unconstrained, and a map on
+    the range of all runs together would be fitted where one group alone has data and
+    extrapolate wildly when that group is held out. On the range every group covers, a held-out
+    group is predicted inside the range by what the others saw, and beyond it by the end values
+    and the linear compliance, as a new condition is.
+    """
+    groups = groups or {r.run_id: r.run_id for r in runs}
+    by: dict = {}
+    for r in runs:
+        if channel not in r.torques:
+            raise ValueError(f"run {r.run_id!r}: no torque channel {channel!r}; have {sorted(r.torques)}")
+        by.setdefault(groups[r.run_id], []).append(r.torques[channel][r.t >= r.t[0] + t_skip])
+    lo = max(float(np.quantile(np.concatenate(v), q)) for v in by.values())
+    hi = min(float(np.quantile(np.concatenate(v), 1 - q)) for v in by.values())
+    if not hi > lo:
+        raise ValueError(f"torque {channel!r}: the groups of runs share no range "
+                         f"(largest low quantile {lo:.4g} N m >= smallest high one {hi:.4g} N m)")
+    return lo, hi
+
+
+def resolve_torque_map(runs: Sequence[Run], spec: RigSpec, groups: Mapping | None = None,
+                       n: int | None = None) -> RigSpec:
+    """``spec`` with each torque map's range set to the range every group of ``runs`` covers
+    (:func:`torque_range`) and (``n``) its number of intervals replaced."""
+    if not spec.torque_map:
+        return spec
+    tm = {}
+    for channel, v in spec.torque_map.items():
+        lo, hi = torque_range(runs, channel, groups, spec.t_skip)
+        tm[channel] = (lo, hi, int(n if n is not None else (v if np.ndim(v) == 0 else v[2])))
+    return spec.with_(torque_map=tm)
+
+
 def _shared_columns(run: Run, spec: RigSpec, basis: MapBasis | None, a_mid: float):
     names, cols = [], []
     a = run.measured
@@ -306,6 +376,16 @@ def _shared_columns(run: Run, spec: RigSpec, basis: MapBasis | None, a_mid: floa
     if spec.compliance:
         names += compliance_names(spec.compliance)
         cols.append(compliance_columns(spec.compliance, run.torques, spec.torque_scales))
+    for channel, rng in spec.torque_map.items():
+        if np.ndim(rng) == 0:
+            raise ValueError(f"run {run.run_id!r}: the torque map of {channel!r} has no range; "
+                             "resolve it on the training runs (resolve_torque_map)")
+        if channel not in run.torques:
+            raise ValueError(f"run {run.run_id!r}: the torque map needs torque channel {channel!r}; "
+                             f"have {sorted(run.torques)}")
+        D = torque_map_basis(*rng).design(run.torques[channel])
+        names += [f"tmap_{channel}{j}" for j in range(D.shape[1])]
+        cols.append(D)
     if spec.input_harmonics:
         if not spec.gear_ratio:
             raise ValueError(f"run {run.run_id!r}: an input-side map needs a gear ratio")
@@ -447,6 +527,8 @@ def fit_rig(runs: Sequence[Run], spec: RigSpec, widths: Mapping | None = None) -
     """
     if not runs:
         raise ValueError("a rig fit needs at least one run")
+    if any(np.ndim(v) == 0 for v in spec.torque_map.values()):
+        spec = resolve_torque_map(runs, spec)
     lo, hi = map_range(runs, spec.t_skip)
     basis = make_basis(runs, spec.spacing, spec.t_skip) if spec.spacing else None
     a_mid = 0.5 * (lo + hi)
@@ -655,14 +737,17 @@ def inner_groups(runs: Sequence[Run], by: str | None) -> dict:
 
 def evaluate(runs: Sequence[Run], spec: RigSpec, folds: Sequence[Mapping],
              spacings: Sequence[float] | None = None,
-             keep_residuals: bool = False, variants=None) -> tuple[list[dict], list[dict]]:
+             keep_residuals: bool = False, variants=None,
+             torque_knots: Sequence[int] | None = None) -> tuple[list[dict], list[dict]]:
     """Fit on each fold's training runs, score every run of the fold.
 
     ``spacings``: candidate knot spacings chosen per fold on the training runs alone
     (:func:`choose_spacing`); ``None`` keeps ``spec.spacing``. ``variants``: candidate model
     forms (:meth:`RigSpec.with_` keyword dicts, or ``"takeup"`` for :func:`takeup_variants` of
-    the training runs) chosen per fold on the training runs alone, before the spacing. Both
-    choices hold out groups of training runs (:func:`inner_groups`: by the fold's condition).
+    the training runs) chosen per fold on the training runs alone, before the spacing.
+    ``torque_knots``: candidate numbers of intervals of the torque map (``spec.torque_map``),
+    its range the one every inner group covers. Every choice holds out groups of training runs
+    (:func:`inner_groups`: by the fold's condition).
 
     Returns
     -------
@@ -683,7 +768,7 @@ def evaluate(runs: Sequence[Run], spec: RigSpec, folds: Sequence[Mapping],
     for fold in folds:
         train = [by_id[i] for i in fold["train"]]
         fspec, scores, vscores = choose_model(train, spec, spacings, variants,
-                                              inner_groups(train, fold.get("by")))
+                                              inner_groups(train, fold.get("by")), torque_knots)
         fit = fit_rig(train, fspec)
         kept = {}
         for role, ids in (("train", fold["train"]), ("test", fold["test"])):
@@ -708,23 +793,37 @@ def evaluate(runs: Sequence[Run], spec: RigSpec, folds: Sequence[Mapping],
 
 
 def choose_model(runs: Sequence[Run], spec: RigSpec, spacings: Sequence[float] | None = None,
-                 variants=None, groups: Mapping | None = None) -> tuple[RigSpec, dict | None, list | None]:
-    """The model form (``variants``) and then the knot spacing (``spacings``) with the least
-    held-out error over ``runs`` (groups of them held out in turn). Returns ``(spec, spacing
-    scores, variant scores)``; ``spec`` unchanged when there is nothing to choose."""
+                 variants=None, groups: Mapping | None = None,
+                 torque_knots: Sequence[int] | None = None) -> tuple[RigSpec, dict | None, list | None]:
+    """The model form (``variants``), then the torque map's number of intervals
+    (``torque_knots``), then the knot spacing (``spacings``) with the least held-out error over
+    ``runs`` (groups of them held out in turn). A torque map's range is the one every group
+    covers (:func:`resolve_torque_map`). Returns ``(spec, spacing scores, variant scores)``; the
+    torque-map scores are in the spacing scores under ``"torque_knots"``."""
     if variants == "takeup":
         variants = takeup_variants(runs, spec)
-    if not (variants and len(variants) > 1) and not (spacings and spec.spacing):
+    spec = resolve_torque_map(runs, spec, groups, torque_knots[0] if torque_knots else None)
+    choose_knots = bool(spec.torque_map and torque_knots and len(torque_knots) > 1)
+    if not (variants and len(variants) > 1) and not (spacings and spec.spacing) and not choose_knots:
         return spec, None, None
     base = fit_rig(runs, spec)
     widths = {k: v["play_width"] for k, v in base.per_run.items()}
     vscores = None
     if variants and len(variants) > 1:
         spec, vscores = choose_variant(runs, spec, variants, widths, groups)
+        spec = resolve_torque_map(runs, spec, groups)
     scores = None
+    if choose_knots:
+        # A spline's resolution, like the map's knot spacing, is judged on every sample: the
+        # training runs' steady strokes never carry the torques near zero that the map is for.
+        kscores = {int(n): heldout_rms(runs, resolve_torque_map(runs, spec, groups, n), widths, groups)
+                   for n in torque_knots}
+        spec = resolve_torque_map(runs, spec, groups, min(kscores, key=kscores.get))
+        scores = {"torque_knots": kscores}
     if spacings and spec.spacing:
-        best, scores = choose_spacing(runs, spec, spacings, widths, groups)
+        best, sscores = choose_spacing(runs, spec, spacings, widths, groups)
         spec = spec.with_(spacing=best)
+        scores = {**sscores, **(scores or {})}
     return spec, scores, vscores
 
 
