@@ -14,13 +14,15 @@ def main(smk):
         runs.append(rig.run_from_canonical(df, meta, p.pair["measured"], p.pair["truth"],
                                            list(p.compliance), member["conditions"], member["log_id"]))
     s = dict(p.settings)
-    spec = rig.RigSpec(spacing=max(s["spacings"]), compliance=dict(p.compliance), max_play=s["max_play"],
+    knots = list(s.get("torque_knots") or [8])
+    spec = rig.RigSpec(spacing=max(s["spacings"]), max_play=s["max_play"],
                        travel=s["travel"], t_skip=s["t_skip"], transient=s.get("transient"),
-                       latency=True if s.get("latency") == "run" else "shared")
-    # The compliance's form (declared, or the play take-up) and the reversal transient are chosen
-    # per fold on its training runs, like the knot spacing.
+                       latency=True if s.get("latency") == "run" else "shared",
+                       **rig.declared_compliance(p.compliance, knots[0]))
+    # The compliance's form (declared, or the play take-up), the reversal transient and a torque
+    # map's number of intervals are chosen per fold on its training runs, like the knot spacing.
     out = report_rig(smk.wildcards.rig, p.pair["measured"], runs, spec, list(p.splits), s["spacings"],
-                     p.truth_counts_per_rev, variants="takeup")
+                     p.truth_counts_per_rev, variants="takeup", torque_knots=knots)
     atomic.write_json(out["block"], smk.output.block)
     for key in ("heldout", "splits", "conditions"):
         atomic.write_table(out["tables"][key], smk.output[key])

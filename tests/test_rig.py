@@ -6,6 +6,7 @@ MRDLab motor grid (0.0428 mrad) and the measured side on an 8192-cpr grid (0.767
 """
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -521,3 +522,33 @@ def test_torque_map_recovers_the_takeup_curve(takeup_rig):
     assert fit.shared()["torque_front:linear"] == pytest.approx(-0.2, rel=0.05)
     after, before = rig.pooled(rows)["steady_std"], rig.pooled(poly)["steady_std"]
     assert after < 1.2 * floor < before
+
+
+def test_declared_map_term_becomes_a_torque_map_beside_the_linear_term():
+    out = rig.declared_compliance({"tb": ["map"], "tf": ["linear", "signed_square"]}, 4)
+    assert out == {"compliance": {"tb": ["linear"], "tf": ["linear", "signed_square"]},
+                   "torque_map": {"tb": 4}}
+    assert rig.declared_compliance({"tb": ["linear", "map"]})["compliance"] == {"tb": ["linear"]}
+
+
+def test_rig_report_shows_the_torque_map(takeup_rig):
+    from enclab.residuals import rig_report
+
+    runs = [takeup_rig[i] for i in (0, 1, 2, 4, 5)]
+    spec = rig.RigSpec(spacing=None, **rig.declared_compliance(
+        {"torque_back": ["linear", "map"], "torque_front": ["linear"]}, 4))
+    out = rig_report.report_rig("sim", "theta_out", runs, spec,
+                                [{"name": "load", "by": "load", "train": [0.0, 0.3], "test": [0.6]}],
+                                None, variants="takeup", torque_knots=[4, 16])
+    fold = out["block"]["folds"][0]
+    tmap = fold["torque_map"]["torque_back"]
+    assert tmap["intervals"] in (4, 16) and tmap["lo"] < 0 < tmap["hi"]
+    assert set(fold["spacing_scores"]["torque_knots"]) == {4, 16}
+    json.dumps(out["block"])  # the block is plain JSON
+    assert "torque map of torque_back" in out["markdown"]
+    ax = out["figures"]["compliance"].axes[0]
+    assert "map (" in ax.get_title()
+    # the twist curve drawn bends (the map), where the linear term alone would be straight
+    T, drawn = ax.lines[0].get_xdata(), ax.lines[0].get_ydata()
+    straight = np.polyval(np.polyfit(T, drawn, 1), T)
+    assert np.max(np.abs(drawn - straight)) > 0.1 * np.ptp(drawn)

@@ -12,8 +12,8 @@ scored on held-out runs:
 - ``rig``: the compliance, one latency for the rig, the reversal transient
   (knots every 4 mrad of motor travel), and the map's knot spacing chosen per fold on the
   training runs; ``rig, per-run latency`` the same with a latency per run;
-- ``rig+takeup`` (the rig rule's model): the ``rig`` model with its form chosen per fold on the
-  training runs: the back torque's ``T|T|`` kept or replaced by the play take-up ``tanh(T/T0)``
+- ``rig+takeup`` (the rig rule's model for a declared ``signed_square``): the ``rig`` model
+  with its form chosen per fold on the training runs: the back torque's ``T|T|`` kept or replaced by the play take-up ``tanh(T/T0)``
   (``T0`` = 0.1, 0.2, 0.4 or 0.8 times the torque's std), the reversal transient kept or left
   out; chosen on the steady strokes of one training condition value held out at a time, then the
   knot spacing the same way;
@@ -23,7 +23,10 @@ scored on held-out runs:
   slopes beyond): its number of intervals (4, 8 or 16) chosen per fold on the training runs, one
   condition value held out at a time, on every sample, then the knot spacing the same way. The
   gear's side of its play follows the torque it carries, not only the travel since a reversal:
-  at a load that nearly balances the friction the torque stays near zero well into a stroke.
+  at a load that nearly balances the friction the torque stays near zero well into a stroke;
+- ``rig+torquemap+form`` (the rig rule's model for ``compliance: {torque_back: [linear, map],
+  torque_front: [linear]}``): the same with the reversal transient kept or left out, chosen per
+  fold on the training runs before the number of intervals.
 
 Splits: frequency (train 0.1/0.3/0.5 Hz, test 0.2/0.4 Hz) and load (train 10/20 %, test 30/40 %);
 ``--loro`` runs leave-one-run-out folds instead (knot spacing fixed at 0.05 rad, ``--loro-max``
@@ -75,6 +78,9 @@ MODELS = {
     "rig+torquemap": (rig.RigSpec(spacing=0.05, compliance={"torque_back": ["linear"], "torque_front": ["linear"]},
                                   torque_map={"torque_back": 8}, latency="shared", transient=0.004), SPACINGS,
                       None, TORQUE_KNOTS),
+    "rig+torquemap+form": (rig.RigSpec(spacing=0.05, compliance={"torque_back": ["linear"], "torque_front": ["linear"]},
+                                       torque_map={"torque_back": 4}, latency="shared", transient=0.004), SPACINGS,
+                           "takeup", TORQUE_KNOTS),
 }
 # Done-when targets (steady, all) in rad and the independent study's reference for the full model
 TARGETS = {"frequency": (0.55e-3, 1.20e-3), "load": (0.70e-3, 1.45e-3)}

@@ -60,7 +60,7 @@ from enclab.residuals.effects import motion_sign, play_operator
 
 __all__ = ["Run", "RigSpec", "RigFit", "steady_mask", "fit_rig", "predict_run", "score_run",
            "choose_spacing", "choose_variant", "input_columns", "choose_model", "takeup_variants", "heldout_rms",
-           "inner_groups", "make_folds", "torque_map_basis", "torque_range", "resolve_torque_map",
+           "inner_groups", "make_folds", "declared_compliance", "torque_map_basis", "torque_range", "resolve_torque_map",
            "evaluate", "pooled", "fold_spread", "floor_std", "map_range",
            "run_from_canonical"]
 
@@ -358,6 +358,21 @@ def resolve_torque_map(runs: Sequence[Run], spec: RigSpec, groups: Mapping | Non
         lo, hi = torque_range(runs, channel, groups, spec.t_skip)
         tm[channel] = (lo, hi, int(n if n is not None else (v if np.ndim(v) == 0 else v[2])))
     return spec.with_(torque_map=tm)
+
+
+def declared_compliance(declared: Mapping, n_intervals: int = 8) -> dict:
+    """``{"compliance": ..., "torque_map": ...}`` (:meth:`RigSpec.with_` keywords) of a declared
+    compliance ``{torque channel: [term, ...]}`` whose terms may include ``map``: that channel's
+    torque map, with ``n_intervals`` intervals until they are chosen on held-out runs and the
+    ``linear`` term beside it (the map has its slope removed: the linear term carries it)."""
+    compliance, torque_map = {}, {}
+    for channel, terms in declared.items():
+        terms = list(terms)
+        if "map" in terms:
+            torque_map[channel] = int(n_intervals)
+            terms = ["linear"] + [t for t in terms if t not in ("map", "linear")]
+        compliance[channel] = terms
+    return {"compliance": compliance, "torque_map": torque_map}
 
 
 def _shared_columns(run: Run, spec: RigSpec, basis: MapBasis | None, a_mid: float):

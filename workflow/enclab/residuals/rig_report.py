@@ -61,12 +61,14 @@ def remains(runs: Sequence[rg.Run], residuals: Mapping, spec: rg.RigSpec, bin_wi
 
 
 def analyse_rig(runs: Sequence[rg.Run], spec: rg.RigSpec, splits: Sequence[Mapping],
-                spacings: Sequence[float] | None, variants=None) -> dict:
+                spacings: Sequence[float] | None, variants=None,
+                torque_knots: Sequence[int] | None = None) -> dict:
     """Held-out evaluation of one rig and one measured channel, and the fit on every run.
 
     ``variants``: candidate model forms chosen per fold on its training runs
     (:func:`enclab.residuals.rig.evaluate`; ``"takeup"``: the declared compliance or the play
-    take-up, with or without the reversal transient).
+    take-up, with or without the reversal transient). ``torque_knots``: candidate numbers of
+    intervals of the torque maps of ``spec`` (:func:`enclab.residuals.rig.choose_model`).
 
     Returns
     -------
@@ -77,12 +79,13 @@ def analyse_rig(runs: Sequence[rg.Run], spec: rg.RigSpec, splits: Sequence[Mappi
         spacing chosen by leave-one-run-out) and ``spacing_scores``.
     """
     folds = rg.make_folds(runs, splits)
-    rows, out = rg.evaluate(runs, spec, folds, spacings, keep_residuals=True, variants=variants)
+    rows, out = rg.evaluate(runs, spec, folds, spacings, keep_residuals=True, variants=variants,
+                            torque_knots=torque_knots)
     rem = {}
     for split in dict.fromkeys(f["split"] for f in out):
         res = {k: v for f in out if f["split"] == split for k, v in f["residuals"].items()}
         rem[split] = remains(runs, res, spec)
-    fspec, scores, _ = rg.choose_model(runs, spec, spacings, variants)
+    fspec, scores, _ = rg.choose_model(runs, spec, spacings, variants, torque_knots=torque_knots)
     final = rg.fit_rig(runs, fspec)
     return {"rows": rows, "folds": out, "spread": rg.fold_spread(out) if out else {}, "remains": rem,
             "final": final, "spacing_scores": scores, "spec": spec}
@@ -175,7 +178,8 @@ def term_label(name: str, spec: rg.RigSpec) -> str:
 def _channel_curve(fit: rg.RigFit, channel: str, T: np.ndarray) -> np.ndarray:
     names = compliance_names(fit.spec.compliance)
     coef = [fit.coef[fit.names.index(n)] for n in names]
-    return compliance_curve(coef, fit.spec.compliance, channel, T, fit.spec.torque_scales)
+    return (compliance_curve(coef, fit.spec.compliance, channel, T, fit.spec.torque_scales)
+            + fit.torque_map_curve(channel, T))
 
 
 def compliance_figure(result: Mapping, torques: Mapping, title: str = "") -> Figure:
@@ -200,6 +204,9 @@ def compliance_figure(result: Mapping, torques: Mapping, title: str = "") -> Fig
             J = np.column_stack([compliance_curve([1.0 if m == n else 0.0 for m in names], spec, ch, T,
                                                   fit.spec.torque_scales) for n in cols])
             ii = [idx[n] for n in cols]
+            if ch in fit.spec.torque_map:
+                J = np.column_stack([J, rg.torque_map_basis(*fit.spec.torque_map[ch]).design(T)])
+                ii += [i for i, n in enumerate(fit.names) if n.startswith(f"tmap_{ch}")]
             sd = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", J, fit.cov[np.ix_(ii, ii)], J), 0))
             ax.fill_between(T, (curve - 1.6449 * sd) * MRAD, (curve + 1.6449 * sd) * MRAD, color="C1",
                             alpha=0.3, lw=0, label="90 % band")
@@ -212,6 +219,8 @@ def compliance_figure(result: Mapping, torques: Mapping, title: str = "") -> Fig
         ax.set_ylabel("twist (mrad)")
         terms = " + ".join(f"{fit.coef[idx[n]]:+.3g} {term_label(n, fit.spec)}"
                            for n in names if n.startswith(ch + ":"))
+        if ch in fit.spec.torque_map:
+            terms += f" + map ({fit.spec.torque_map[ch][2]} intervals)"
         ax.set_title(f"{ch}: {terms} (rad, N m)", fontsize=8)
         ax.legend(fontsize=6)
     if title:
@@ -285,6 +294,8 @@ def markdown(name: str, channel: str, result: Mapping, conditions: Sequence[str]
                           + (["compliance " + ", ".join(f"{n.split(':')[0]} {term_label(n, fit.spec)}"
                                                          for n in compliance_names(fit.spec.compliance))]
                              if fit.spec.compliance else [])
+                          + [f"torque map of {c} ({v[2]} intervals over {v[0]:.3g} .. {v[1]:.3g} N m, chosen "
+                             "on held-out runs)" for c, v in fit.spec.torque_map.items()]
                           + ([f"reversal transient (knots every {fit.spec.transient:g} rad)"] if fit.spec.transient else [])
                           + ([(f"input-side map ({fit.spec.input_harmonics} harmonics per input revolution, "
                                f"gear ratio {fit.spec.gear_ratio:g})")] if fit.spec.input_harmonics else []))
@@ -373,6 +384,8 @@ def markdown(name: str, channel: str, result: Mapping, conditions: Sequence[str]
 def _fit_block(fit: rg.RigFit) -> dict:
     block = {"spacing": fit.spec.spacing, "shared": fit.shared(),
              "compliance": dict(fit.spec.compliance), "torque_scales": dict(fit.spec.torque_scales),
+             "torque_map": {c: {"lo": float(v[0]), "hi": float(v[1]), "intervals": int(v[2])}
+                            for c, v in fit.spec.torque_map.items()},
              "transient": fit.spec.transient,
              "ci90": {k: list(v) for k, v in fit.ci().items()}, "per_run": fit.per_run,
              "train": list(fit.train_ids)}
@@ -392,11 +405,12 @@ def _fit_block(fit: rg.RigFit) -> dict:
 
 def report_rig(name: str, channel: str, runs: Sequence[rg.Run], spec: rg.RigSpec,
                splits: Sequence[Mapping], spacings: Sequence[float] | None,
-               truth_counts_per_rev: float | None = None, variants=None) -> dict:
+               truth_counts_per_rev: float | None = None, variants=None,
+               torque_knots: Sequence[int] | None = None) -> dict:
     """Everything the rig rule writes for one measured channel: ``block`` (JSON), ``tables``
     (``heldout`` per fold and run, ``splits``, ``conditions``), ``figures`` (``map``,
     ``compliance``, ``heldout``, ``remains``) and ``markdown``."""
-    result = analyse_rig(runs, spec, splits, spacings, variants)
+    result = analyse_rig(runs, spec, splits, spacings, variants, torque_knots)
     conditions = list(dict.fromkeys(k for r in runs for k in r.conditions))
     torques = {ch: (float(min(np.percentile(r.torques[ch], 0.5) for r in runs)),
                     float(max(np.percentile(r.torques[ch], 99.5) for r in runs))) for ch in spec.compliance}
