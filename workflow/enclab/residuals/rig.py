@@ -812,7 +812,10 @@ def choose_model(runs: Sequence[Run], spec: RigSpec, spacings: Sequence[float] |
                  torque_knots: Sequence[int] | None = None) -> tuple[RigSpec, dict | None, list | None]:
     """The model form (``variants``), then the torque map's number of intervals
     (``torque_knots``), then the knot spacing (``spacings``) with the least held-out error over
-    ``runs`` (groups of them held out in turn). A torque map's range is the one every group
+    ``runs`` (groups of them held out in turn). When a form is to be chosen, the knot spacing is
+    first chosen for the declared form: a form judged beside too coarse an angle map is chosen
+    for the part of the map it absorbs, so the choice would depend on where ``spec.spacing``
+    starts. A torque map's range is the one every group
     covers (:func:`resolve_torque_map`). Returns ``(spec, spacing scores, variant scores)``; the
     torque-map scores are in the spacing scores under ``"torque_knots"``."""
     if variants == "takeup":
@@ -824,6 +827,10 @@ def choose_model(runs: Sequence[Run], spec: RigSpec, spacings: Sequence[float] |
     base = fit_rig(runs, spec)
     widths = {k: v["play_width"] for k, v in base.per_run.items()}
     vscores = None
+    if spacings and spec.spacing and ((variants and len(variants) > 1) or choose_knots):
+        spec = spec.with_(spacing=choose_spacing(runs, spec, spacings, widths, groups)[0])
+        base = fit_rig(runs, spec)
+        widths = {k: v["play_width"] for k, v in base.per_run.items()}
     if variants and len(variants) > 1:
         spec, vscores = choose_variant(runs, spec, variants, widths, groups)
         spec = resolve_torque_map(runs, spec, groups)
