@@ -31,11 +31,12 @@ def _faults(keep: bool) -> int:
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's mallopt")
 def test_freed_blocks_are_reused_not_refaulted():
     pages = 4 * (1 << 22) // 4096
-    # Default glibc: the 16 MiB freed at the heap's top is trimmed (or the blocks were mapped),
-    # so every round faults its pages in again.
-    assert _faults(False) > 25 * pages
+    kept, default = _faults(True), _faults(False)
     # Kept: the first round's pages serve all the others.
-    assert _faults(True) < 3 * pages
+    assert kept < 3 * pages
+    # Default glibc: the memory freed at the heap's top is trimmed (or the blocks were mapped),
+    # so round after round faults its pages in again (about half of the 50 rounds' pages here).
+    assert default > 10 * pages
 
 
 def test_is_idempotent():
