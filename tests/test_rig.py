@@ -391,10 +391,14 @@ def test_takeup_variants_scale_with_the_torque_and_keep_the_declared_form_first(
     spec = rig.RigSpec(compliance=SPEC_COMP, transient=0.004)
     forms = rig.takeup_variants(takeup_rig, spec, relative=(0.5,))
     sd = np.std(np.concatenate([r.torques["torque_back"] for r in takeup_rig]))
-    assert forms[0] == {} and forms[2] == {"transient": None}
+    assert forms[0] == {} and forms[4] == {"transient": None}
     assert forms[1]["torque_scales"] == {"torque_back": pytest.approx(0.5 * sd)}
     assert forms[1]["compliance"]["torque_front"] == ["linear"]
-    assert len(forms) == 4
+    # the declared form without each channel in turn
+    assert forms[2]["compliance"] == {"torque_front": ["linear"]}
+    assert forms[3]["compliance"] == {"torque_back": ["linear", "signed_square"]}
+    assert len(forms) == 8
+    assert len(rig.takeup_variants(takeup_rig, spec, relative=(0.5,), drop_channels=False)) == 4
     # nothing to replace: only the transient is a choice
     assert rig.takeup_variants(takeup_rig, rig.RigSpec(compliance={"torque_back": ["linear"]})) == [{}]
 
@@ -409,7 +413,7 @@ def test_rig_report_shows_the_chosen_takeup(takeup_rig):
                                 None, variants="takeup")
     fold = out["block"]["folds"][0]
     assert fold["compliance"]["torque_back"] == ["linear", "saturating"]
-    assert len(fold["variant_scores"]) == 5 and "torque_back:T0" in fold["shared"]
+    assert len(fold["variant_scores"]) == 7 and "torque_back:T0" in fold["shared"]
     text = out["markdown"]
     assert "Model form per fold" in text and "tanh(T/" in text
     ax = out["figures"]["compliance"].axes[0]
@@ -552,3 +556,31 @@ def test_rig_report_shows_the_torque_map(takeup_rig):
     T, drawn = ax.lines[0].get_xdata(), ax.lines[0].get_ydata()
     straight = np.polyval(np.polyfit(T, drawn, 1), T)
     assert np.max(np.abs(drawn - straight)) > 0.1 * np.ptp(drawn)
+
+
+@pytest.mark.parametrize("front, kept", [(0.0, False), (-0.2, True)])
+def test_choose_variant_leaves_out_a_torque_channel_the_runs_do_not_support(front, kept):
+    # Both torques declared; the front one twists the rig (kept) or does not (left out: its
+    # correlation with the back torque would let it take any value the training runs favour).
+    comp = {"torque_back:linear": 0.05, **({"torque_front:linear": front} if front else {})}
+    runs = rig.simulate_rig(np.random.default_rng(11), CONDS, step=STEP, truth_step=TRUTH_STEP,
+                            compliance=comp, play_width=[0.02, 0.025, 0.03], latency=0.001)
+    spec = rig.RigSpec(spacing=None, compliance={"torque_back": ["linear"], "torque_front": ["linear"]})
+    variants = rig.takeup_variants(runs, spec)
+    assert len(variants) == 3
+    chosen, scores = rig.choose_variant(runs, spec, variants, groups=rig.inner_groups(runs, "load"))
+    assert len(scores) == 3 and min(scores) > 0
+    assert ("torque_front" in chosen.compliance) is kept
+    assert "torque_back" in chosen.compliance
+
+
+def test_fold_spread_counts_the_folds_that_keep_a_term(sim_rig):
+    runs = sim_rig
+    spec = rig.RigSpec(spacing=None, compliance={"torque_back": ["linear"], "torque_front": ["linear"]})
+    a = rig.fit_rig(runs[:6], spec)
+    b = rig.fit_rig(runs[6:], spec.with_(compliance={"torque_back": ["linear"]}))
+    spread = rig.fold_spread([{"fit": a}, {"fit": b}])
+    assert spread["torque_front:linear"]["kept_in"] == 1 and spread["torque_front:linear"]["folds"] == 2
+    assert spread["torque_back:linear"]["kept_in"] == 2
+    assert "torque_front:linear" in rig.loose_parameters(spread, 0.15)
+    assert rig.loose_parameters(spread, np.inf) == ["torque_front:linear"]

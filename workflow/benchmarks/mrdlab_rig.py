@@ -25,8 +25,9 @@ scored on held-out runs:
   gear's side of its play follows the torque it carries, not only the travel since a reversal:
   at a load that nearly balances the friction the torque stays near zero well into a stroke;
 - ``rig+torquemap+form`` (the rig rule's model for ``compliance: {torque_back: [linear, map],
-  torque_front: [linear]}``): the same with the reversal transient kept or left out, chosen per
-  fold on the training runs before the number of intervals.
+  torque_front: [linear]}``): the same with the reversal transient kept or left out and each
+  torque channel kept or left out, chosen per fold on the training runs (one-standard-error
+  rule, :func:`enclab.residuals.rig.choose_variant`) before the number of intervals.
 
 Splits: frequency (train 0.1/0.3/0.5 Hz, test 0.2/0.4 Hz) and load (train 10/20 %, test 30/40 %);
 ``--loro`` runs leave-one-run-out folds instead (knot spacing fixed at 0.05 rad, ``--loro-max``
@@ -215,6 +216,8 @@ def main(argv=None) -> int:
                                "spacing": f["spacing"], "form": _form(fit.spec), "parameter": name, "value": value,
                                "ci_lo": ci.get(name, (None, None))[0], "ci_hi": ci.get(name, (None, None))[1],
                                "spread_over_condition_folds": spread.get(name, {}).get("rel_dev"),
+                               "kept_in_condition_folds": f"{spread[name]['kept_in']}/{spread[name]['folds']}"
+                               if name in spread else None,
                                "spread_over_loro_folds": loro_spread.get(name, {}).get("rel_dev")})
         for group in ([cond_folds, "spread_over_condition_folds"],
                       [[f for f in out if f["split"] == "runs"], "spread_over_loro_folds"]):

@@ -117,7 +117,8 @@ def _rigs(blocks: Sequence[Mapping] | None, max_spread: float = 0.15) -> dict | 
                    for k in ("split", "before_steady", "after_steady", "after_all", "floor")}
                   for s in b.get("splits") or []]
         loose = sorted(name for name, v in (b.get("spread") or {}).items()
-                       if _num(v.get("rel_dev")) is not None and v["rel_dev"] > max_spread)
+                       if (_num(v.get("rel_dev")) is not None and v["rel_dev"] > max_spread)
+                       or (v.get("kept_in") or 0) < (v.get("folds") or 0))
         rows.append({"rig": b["rig"], "measured": b["measured"], "runs": len(b.get("runs") or []),
                      "splits": splits, "not_pinned_down": loose})
     return {"rigs": len(rows), "rows": rows} if rows else None

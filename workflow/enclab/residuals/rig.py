@@ -59,9 +59,9 @@ from enclab.residuals.calibration import MapBasis, compliance_columns, complianc
 from enclab.residuals.effects import motion_sign, play_operator
 
 __all__ = ["Run", "RigSpec", "RigFit", "steady_mask", "fit_rig", "predict_run", "score_run",
-           "choose_spacing", "choose_variant", "input_columns", "choose_model", "takeup_variants", "heldout_rms",
+           "choose_spacing", "choose_variant", "heldout_per_run", "n_shared", "input_columns", "choose_model", "takeup_variants", "heldout_rms",
            "inner_groups", "make_folds", "declared_compliance", "torque_map_basis", "torque_range", "resolve_torque_map",
-           "evaluate", "pooled", "fold_spread", "floor_std", "map_range",
+           "evaluate", "pooled", "fold_spread", "loose_parameters", "floor_std", "map_range",
            "run_from_canonical"]
 
 
@@ -600,7 +600,16 @@ def score_run(run: Run, prediction: np.ndarray, spec: RigSpec) -> dict:
 
 def heldout_rms(runs: Sequence[Run], spec: RigSpec, widths: Mapping,
                 groups: Mapping | None = None, on: str = "all") -> float:
-    """Rms residual of each group of ``runs`` under the shared terms fitted without it.
+    """Rms residual of each group of ``runs`` under the shared terms fitted without it
+    (:func:`heldout_per_run` pooled)."""
+    ss, n = heldout_per_run(runs, spec, widths, groups, on)
+    return float(np.sqrt(ss.sum() / n.sum()))
+
+
+def heldout_per_run(runs: Sequence[Run], spec: RigSpec, widths: Mapping,
+                    groups: Mapping | None = None, on: str = "all") -> tuple[np.ndarray, np.ndarray]:
+    """Sum of squared residuals and number of samples of each run (in the order of ``runs``),
+    each group of ``runs`` scored under the shared terms fitted without it.
 
     The play widths start at ``widths``; the shared terms of ``spec`` are refitted without
     each group in turn (from the summed normal equations, minus the group's), and the left-out
@@ -621,17 +630,17 @@ def heldout_rms(runs: Sequence[Run], spec: RigSpec, widths: Mapping,
     _, eqs = _normal_equations(runs, spec, basis, 0.5 * (lo + hi), widths, play_step=True)
     G = sum(e[0] for e in eqs)
     h = sum(e[1] for e in eqs)
-    ss, n = 0.0, 0
+    ss, n = np.zeros(len(runs)), np.zeros(len(runs))
     keep = {r.run_id: (steady_mask(r.t, r.truth, spec.travel, spec.t_skip)[_fit_mask(r, spec)]
                        if on == "steady" else slice(None)) for r in runs}
     for key in dict.fromkeys(groups[r.run_id] for r in runs):
-        inside = [(r.run_id, e) for r, e in zip(runs, eqs) if groups[r.run_id] == key]
-        beta = _solve(G - sum(e[0] for _, e in inside), h - sum(e[1] for _, e in inside))
-        for run_id, (_, _, Xp, zp, *_) in inside:
+        inside = [(k, r.run_id, e) for k, (r, e) in enumerate(zip(runs, eqs)) if groups[r.run_id] == key]
+        beta = _solve(G - sum(e[0] for *_, e in inside), h - sum(e[1] for *_, e in inside))
+        for k, run_id, (_, _, Xp, zp, *_) in inside:
             r = (zp - Xp @ beta)[keep[run_id]]
-            ss += float(r @ r)
-            n += r.size
-    return float(np.sqrt(ss / n))
+            ss[k] = float(r @ r)
+            n[k] = r.size
+    return ss, n
 
 
 def choose_spacing(runs: Sequence[Run], spec: RigSpec, candidates: Sequence[float],
@@ -650,12 +659,17 @@ def choose_spacing(runs: Sequence[Run], spec: RigSpec, candidates: Sequence[floa
 
 
 def takeup_variants(runs: Sequence[Run], spec: RigSpec, relative: Sequence[float] = (0.1, 0.2, 0.4, 0.8),
-                    transient: bool = True) -> list[dict]:
+                    transient: bool = True, drop_channels: bool = True) -> list[dict]:
     """Candidate compliance forms and reversal transients to choose from on held-out runs.
 
     For every torque channel declared with ``signed_square``, a candidate replaces it with the
     play take-up ``saturating`` ``tanh(T / T0)``, ``T0`` = each of ``relative`` times the
-    channel's std over ``runs`` (no constant of a particular rig). With ``transient`` (and a
+    channel's std over ``runs`` (no constant of a particular rig). With ``drop_channels`` and
+    more than one torque channel declared, the declared form also comes without each channel
+    in turn: torques of one drive are correlated, and a channel whose term is only fitted to
+    what another channel's curve leaves at the training conditions changes sign with the
+    conditions it is fitted on (a coefficient no rig has) and predicts new conditions worse.
+    With ``transient`` (and a
     transient in ``spec``) each candidate also comes without the reversal transient: the
     transient is a function of travel, the take-up one of torque, and at the training runs'
     loads the two can coincide. Returns a list of :meth:`RigSpec.with_` keyword dicts, the
@@ -670,25 +684,55 @@ def takeup_variants(runs: Sequence[Run], spec: RigSpec, relative: Sequence[float
                 for c, terms in spec.compliance.items()}
         scales = {c: float(q * np.std(np.concatenate([r.torques[c] for r in runs]))) for c in channels}
         forms.append({"compliance": comp, "torque_scales": scales})
+    if drop_channels and len(spec.compliance) > 1:
+        for channel in spec.compliance:
+            forms.append({"compliance": {c: t for c, t in spec.compliance.items() if c != channel},
+                          "torque_scales": {c: v for c, v in spec.torque_scales.items() if c != channel},
+                          "torque_map": {c: v for c, v in spec.torque_map.items() if c != channel}})
     if transient and spec.transient:
         forms = forms + [{**f, "transient": None} for f in forms]
     return forms
 
 
+def n_shared(run: Run, spec: RigSpec) -> int:
+    """Number of shared coefficients of ``spec`` (its torque maps resolved)."""
+    basis = make_basis([run], spec.spacing, spec.t_skip) if spec.spacing else None
+    return len(_shared_columns(run, spec, basis, 0.0)[0])
+
+
 def choose_variant(runs: Sequence[Run], spec: RigSpec, variants: Sequence[Mapping],
                    widths: Mapping | None = None, groups: Mapping | None = None,
                    on: str = "steady") -> tuple[RigSpec, list]:
-    """The variant of ``spec`` (:meth:`RigSpec.with_` keyword dicts) with the least held-out
-    error (:func:`heldout_rms`) on steady strokes (``on``): a compliance is a twist of the
+    """The variant of ``spec`` (:meth:`RigSpec.with_` keyword dicts) chosen on held-out error
+    (:func:`heldout_per_run`) on steady strokes (``on``): a compliance is a twist of the
     transmission under load, what the steady strokes show; the reversal windows are dominated by
     the motion inside the play, which a more flexible transient always fits better in-sample
-    and which varies from one reversal to the next. Returns ``(best spec, [held-out rms per
+    and which varies from one reversal to the next.
+
+    One-standard-error rule: of the variants whose held-out mean square lies within one
+    standard error of the best one's (the error of their difference, runs as units), the one
+    with the fewest shared coefficients (then the least error). A term that buys less than the
+    run-to-run scatter of the held-out gain is not supported by the runs: kept, its coefficient
+    follows whichever conditions it was fitted on. Returns ``(chosen spec, [held-out rms per
     variant])``."""
     if widths is None:
         base = fit_rig(runs, spec)
         widths = {k: v["play_width"] for k, v in base.per_run.items()}
-    scores = [heldout_rms(runs, spec.with_(**v), widths, groups, on) for v in variants]
-    return spec.with_(**variants[int(np.argmin(scores))]), scores
+    terms = [heldout_per_run(runs, spec.with_(**v), widths, groups, on) for v in variants]
+    n = terms[0][1]
+    w = n / n.sum()
+    ms = [ss / np.maximum(n, 1) for ss, _ in terms]
+    mean_sq = np.array([float(w @ m) for m in ms])
+    best = int(np.argmin(mean_sq))
+    size = [n_shared(runs[0], spec.with_(**v)) for v in variants]
+    within = []
+    for k, m in enumerate(ms):
+        d = m - ms[best]
+        se = float(np.sqrt(len(d) / max(len(d) - 1, 1) * np.sum(w ** 2 * (d - w @ d) ** 2)))
+        if mean_sq[k] <= mean_sq[best] + se:
+            within.append(k)
+    pick = min(within, key=lambda k: (size[k], mean_sq[k]))
+    return spec.with_(**variants[pick]), [float(np.sqrt(v)) for v in mean_sq]
 
 
 # ----------------------------------------------------------------------------- splits
@@ -818,9 +862,9 @@ def choose_model(runs: Sequence[Run], spec: RigSpec, spacings: Sequence[float] |
     starts. A torque map's range is the one every group
     covers (:func:`resolve_torque_map`). Returns ``(spec, spacing scores, variant scores)``; the
     torque-map scores are in the spacing scores under ``"torque_knots"``."""
+    spec = resolve_torque_map(runs, spec, groups, torque_knots[0] if torque_knots else None)
     if variants == "takeup":
         variants = takeup_variants(runs, spec)
-    spec = resolve_torque_map(runs, spec, groups, torque_knots[0] if torque_knots else None)
     choose_knots = bool(spec.torque_map and torque_knots and len(torque_knots) > 1)
     if not (variants and len(variants) > 1) and not (spacings and spec.spacing) and not choose_knots:
         return spec, None, None
@@ -859,16 +903,27 @@ def pooled(rows: Sequence[Mapping], role: str = "test") -> dict:
 
 
 def fold_spread(folds_out: Sequence[Mapping]) -> dict:
-    """Per scalar shared parameter: mean over folds and the largest relative deviation
-    ``max |p_f - mean| / |mean|``."""
+    """Per scalar shared parameter: mean over the folds that have it, the largest relative
+    deviation ``max |p_f - mean| / |mean|``, ``kept_in`` (folds whose chosen form has it) and
+    ``folds``; a term that some folds' training runs leave out is not pinned down either
+    (:func:`loose_parameters`)."""
     names = sorted({n for f in folds_out for n in f["fit"].shared()})
     out = {}
     for n in names:
         vals = np.array([f["fit"].shared()[n] for f in folds_out if n in f["fit"].shared()])
         mean = float(vals.mean())
         out[n] = {"mean": mean, "min": float(vals.min()), "max": float(vals.max()),
-                  "rel_dev": float(np.max(np.abs(vals - mean)) / abs(mean)) if mean else float("inf")}
+                  "rel_dev": float(np.max(np.abs(vals - mean)) / abs(mean)) if mean else float("inf"),
+                  "kept_in": int(vals.size), "folds": len(folds_out)}
     return out
+
+
+def loose_parameters(spread: Mapping, max_spread: float) -> list[str]:
+    """Shared parameters of a :func:`fold_spread` that move by more than ``max_spread`` between
+    folds or that some folds' chosen form leaves out."""
+    return sorted(n for n, v in spread.items()
+                  if (v.get("rel_dev") is not None and v["rel_dev"] > max_spread)
+                  or v.get("kept_in", 0) < v.get("folds", 0))
 
 
 def run_from_canonical(df, meta: Mapping, measured: str, truth: str, torques: Sequence[str] = (),

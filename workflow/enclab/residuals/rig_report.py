@@ -304,8 +304,10 @@ def markdown(name: str, channel: str, result: Mapping, conditions: Sequence[str]
     if forms:
         lines += ["Model form per fold, chosen on the steady strokes of its training runs (groups of them "
                   "held out in turn): " + "; ".join(
-                      f"{f['fold']}: " + ", ".join(f"{n.split(':')[0]} {term_label(n, f['fit'].spec)}"
-                                                  for n in compliance_names(f["fit"].spec.compliance))
+                      f"{f['fold']}: " + ", ".join([f"{n.split(':')[0]} {term_label(n, f['fit'].spec)}"
+                                                   for n in compliance_names(f["fit"].spec.compliance)]
+                                                  + [f"{c} left out" for c in result["spec"].compliance
+                                                     if c not in f["fit"].spec.compliance])
                       + (f", reversal transient (knots every {f['fit'].spec.transient:g} rad)"
                          if f["fit"].spec.transient else ", no reversal transient") for f in forms) + ".", ""]
     lines += ["## Held out", "", "Residual std (mrad) of reading - prediction on runs the shared terms never "
@@ -336,10 +338,13 @@ def markdown(name: str, channel: str, result: Mapping, conditions: Sequence[str]
                     "fold_spread": spread.get(k, {}).get("rel_dev")})
     if prm:
         lines.append(pd.DataFrame(prm).to_markdown(index=False, floatfmt=".4g"))
-        loose = [p["parameter"] for p in prm if p["fold_spread"] is not None and p["fold_spread"] > SPREAD]
+        loose = [n for n in rg.loose_parameters(spread, SPREAD) if n in fit.shared()]
         if loose:
-            lines += ["", f"Not pinned down: {', '.join(loose)} move by more than {SPREAD:.0%} between folds; "
-                      "read them as a fit of these runs, not as physical values (the folds' training runs do "
+            left_out = [n for n in loose if spread[n]["kept_in"] < spread[n]["folds"]]
+            lines += ["", f"Not pinned down: {', '.join(loose)} move by more than {SPREAD:.0%} between folds"
+                      + (f" or are left out by the form some folds' training runs chose ({', '.join(left_out)})"
+                         if left_out else "")
+                      + "; read them as a fit of these runs, not as physical values (the folds' training runs do "
                       "not cover the same range of the covariate, and the terms trade off against each other "
                       "and the per-run play there)."]
     if truth_counts_per_rev and "scale" in fit.shared():
