@@ -572,6 +572,14 @@ def test_choose_variant_leaves_out_a_torque_channel_the_runs_do_not_support(fron
     assert len(scores) == 3 and min(scores) > 0
     assert ("torque_front" in chosen.compliance) is kept
     assert "torque_back" in chosen.compliance
+    if not kept:
+        from enclab.residuals import rig_report
+
+        out = rig_report.report_rig("sim", "theta_out", runs, spec,
+                                    [{"name": "load", "by": "load", "train": [0.0, 0.3], "test": [0.6]}],
+                                    None, variants="takeup")
+        assert "torque_front left out" in out["markdown"]
+        assert "torque_front" not in out["block"]["final"]["compliance"]
 
 
 def test_fold_spread_counts_the_folds_that_keep_a_term(sim_rig):
