@@ -109,7 +109,8 @@ def simulate_case(rng, case, n_cycles, fs_hz=2000.0, f_nominal=20.0, noise_frac=
         size = rng.uniform(0.005, 0.1)
         kw["noise_std"] = size * STEP
     counts = effects.simulate_counts(rng, t, STEP, A12, a_eq, f_hz, phase, **kw)
-    return t, counts, {"A12": A12, "E_b": e_b_ref, "size": size, "f_hz": f_hz}
+    return t, counts, {"A12": A12, "E_b": e_b_ref, "size": size, "f_hz": f_hz, "phase": phase,
+                       "a_eq": a_eq, "simulator": kw}
 
 
 def _interval(result, name):
