@@ -13,7 +13,8 @@ truth's sinusoid terms (``refit_gain``).
 
 Per case, among draws of at least 3x the detection threshold of the benchmark's summary: the
 named rate overall and among the draws whose oracle gain is positive (the logs that hold the
-evidence).
+evidence); over all draws, the coverage of the 90 % intervals of ``A12`` and ``E_b`` (after)
+among the draws with and without that evidence.
 
 Usage (from the repository root)::
 
@@ -99,6 +100,7 @@ def main(argv=None) -> int:
     for k, r in enumerate(draws.itertuples(index=False)):
         rows.append({"case": r.case, "cycles": r.cycles, "seed": r.seed, "size": r.size,
                      "named": bool(r.named), "identified": bool(r.identified),
+                     "A12_after_cover": bool(r.A12_after_cover), "E_b_after_cover": bool(r.E_b_after_cover),
                      **one(r.case, int(r.cycles), int(r.seed))})
         if (k + 1) % 20 == 0:
             print(f"{k + 1}/{len(draws)} draws, {time.perf_counter() - started:.0f} s", file=sys.stderr)
@@ -114,7 +116,12 @@ def main(argv=None) -> int:
                         "named_at_3x_evident": evident["named"].mean() if len(evident) else None,
                         "missed_at_3x_oracle_negative": int((~big["named"] & (big["oracle_gain"] <= 0)).sum()),
                         "missed_all_oracle_negative": int((~g["named"] & (g["oracle_gain"] <= 0)).sum()),
-                        "missed_all": int((~g["named"]).sum())})
+                        "missed_all": int((~g["named"]).sum()),
+                        "n_evident": int((g["oracle_gain"] > 0).sum()),
+                        "A12_cover_evident": g.loc[g["oracle_gain"] > 0, "A12_after_cover"].mean(),
+                        "E_b_cover_evident": g.loc[g["oracle_gain"] > 0, "E_b_after_cover"].mean(),
+                        "A12_cover_not_evident": g.loc[g["oracle_gain"] <= 0, "A12_after_cover"].mean(),
+                        "E_b_cover_not_evident": g.loc[g["oracle_gain"] <= 0, "E_b_after_cover"].mean()})
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     atomic.write_table(stamp(per), out / "lrde_detectability_draws.csv")

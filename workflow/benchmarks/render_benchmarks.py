@@ -35,6 +35,9 @@ TABLES = [
      "Posterior and baseline estimators of paper 002 over simulated draws (`bench_lrde.py`)."),
     ("lrde_effects_summary.csv", "Low-resolution encoder: effects named and intervals kept",
      "Encoder, clock and motion effects on simulated logs (`bench_lrde_effects.py`)."),
+    ("lrde_detectability.csv", "Low-resolution encoder: which logs hold the evidence",
+     "Named rates at 3x the detection threshold, overall and among the logs whose readings favour "
+     "the true model over the sinusoid's fit (oracle BIC gain > 0; `lrde_detectability.py`)."),
     ("lrde_truth_loop.csv", "Low-resolution encoder: the truth channel's findings in the fit",
      "Hysteresis logs with a fine channel: named by the comparison alone and with the residual "
      "stage's findings, coverage of A12, E_b, a and b before and after (`lrde_truth_loop.py`)."),
