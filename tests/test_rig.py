@@ -579,6 +579,7 @@ def test_choose_variant_leaves_out_a_torque_channel_the_runs_do_not_support(fron
                                     [{"name": "load", "by": "load", "train": [0.0, 0.3], "test": [0.6]}],
                                     None, variants="takeup")
         assert "torque_front left out" in out["markdown"]
+        assert "Left out: torque_front (kept by 0 of 1 folds)" in out["markdown"]
         assert "torque_front" not in out["block"]["final"]["compliance"]
 
 

@@ -347,6 +347,13 @@ def markdown(name: str, channel: str, result: Mapping, conditions: Sequence[str]
                       + "; read them as a fit of these runs, not as physical values (the folds' training runs do "
                       "not cover the same range of the covariate, and the terms trade off against each other "
                       "and the per-run play there)."]
+    dropped = [c for c in result["spec"].compliance if c not in fit.spec.compliance]
+    if dropped:
+        kept = {c: sum(c in f["fit"].spec.compliance for f in result["folds"]) for c in dropped}
+        lines += ["", "Left out: " + ", ".join(f"{c} (kept by {kept[c]} of {len(result['folds'])} folds)"
+                                               for c in dropped)
+                  + ": on held-out training runs the declared term buys less than one standard error of "
+                  "its gain (one-standard-error rule), so no value is reported for it."]
     if truth_counts_per_rev and "scale" in fit.shared():
         s = fit.shared()["scale"]
         lines += ["", f"Scale {s:+.4g}: the truth channel reads {truth_counts_per_rev * (1 - s):,.0f} counts per "
