@@ -59,7 +59,8 @@ from enclab.residuals.calibration import MapBasis, compliance_columns, complianc
 from enclab.residuals.effects import motion_sign, play_operator
 
 __all__ = ["Run", "RigSpec", "RigFit", "steady_mask", "fit_rig", "predict_run", "score_run",
-           "choose_spacing", "choose_variant", "heldout_per_run", "n_shared", "input_columns", "choose_model", "takeup_variants", "heldout_rms",
+           "choose_spacing", "choose_variant", "heldout_per_run", "n_shared", "input_columns",
+           "choose_model", "takeup_variants", "heldout_rms",
            "inner_groups", "make_folds", "declared_compliance", "torque_map_basis", "torque_range", "resolve_torque_map",
            "evaluate", "pooled", "fold_spread", "loose_parameters", "floor_std", "map_range",
            "run_from_canonical"]

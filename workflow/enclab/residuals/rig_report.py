@@ -352,8 +352,8 @@ def markdown(name: str, channel: str, result: Mapping, conditions: Sequence[str]
         kept = {c: sum(c in f["fit"].spec.compliance for f in result["folds"]) for c in dropped}
         lines += ["", "Left out: " + ", ".join(f"{c} (kept by {kept[c]} of {len(result['folds'])} folds)"
                                                for c in dropped)
-                  + ": on held-out training runs the declared term buys less than one standard error of "
-                  "its gain (one-standard-error rule), so no value is reported for it."]
+                  + ": the form without it predicts held-out training runs as well (within one standard "
+                  "error: one-standard-error rule) or better, so no value is reported for it."]
     if truth_counts_per_rev and "scale" in fit.shared():
         s = fit.shared()["scale"]
         lines += ["", f"Scale {s:+.4g}: the truth channel reads {truth_counts_per_rev * (1 - s):,.0f} counts per "
