@@ -239,7 +239,8 @@ def summarise(draws: pd.DataFrame) -> pd.DataFrame:
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--draws", type=int, default=100, help="draws per effect and cycle count")
+    ap.add_argument("--draws", type=int, default=100,
+                    help="draws per effect and cycle count (with --first-draw: the index to stop at)")
     ap.add_argument("--clean-draws", type=int, default=200)
     ap.add_argument("--cycles", type=int, nargs="+", default=[20, 100])
     ap.add_argument("--cases", nargs="+", default=list(CASES), choices=CASES)
@@ -291,6 +292,9 @@ def main(argv=None):
                 c_i = CASES.index(case)
                 if i < n_case and i % n == k:
                     tasks.append((case, cycles, args.seed + 100_000 * c_i + 1000 * cycles + i))
+    if not tasks:
+        ap.error(f"no draws to run: --first-draw {args.first_draw} is the index of the first draw, "
+                 f"--draws {args.draws} and --clean-draws {args.clean_draws} the index to stop at")
     started = time.perf_counter()
     rows = []
     for case, cycles, seed in tasks:
