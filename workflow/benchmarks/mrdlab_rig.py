@@ -13,7 +13,8 @@ scored on held-out runs:
   (knots every 4 mrad of motor travel), and the map's knot spacing chosen per fold on the
   training runs; ``rig, per-run latency`` the same with a latency per run;
 - ``rig+takeup`` (the rig rule's model for a declared ``signed_square``): the ``rig`` model
-  with its form chosen per fold on the training runs: the back torque's ``T|T|`` kept or replaced by the play take-up ``tanh(T/T0)``
+  with its form chosen per fold on the training runs: the back torque's ``T|T|`` kept or
+  replaced by the play take-up ``tanh(T/T0)``
   (``T0`` = 0.1, 0.2, 0.4 or 0.8 times the torque's std), the reversal transient kept or left
   out; chosen on the steady strokes of one training condition value held out at a time, then the
   knot spacing the same way;

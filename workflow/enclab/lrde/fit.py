@@ -539,10 +539,9 @@ def _setup(t, counts, step, f_hz, sigma_range, sigma_prior, harmonics, effects,
     # drift's as 1/duration**2: the start dispersion follows (from 20 cycles on), so that the
     # walkers start inside the posterior. Started wider, a few walkers of a long log's narrow
     # posterior stay far out for the whole chain (R-hat 1.05 after 1000 steps at 100 cycles).
-    n_cycles = max(duration * init["f_hz"], 1.0)
-    shrink = np.sqrt(min(1.0, _DISPERSION_CYCLES / n_cycles))
-    effect_scale = {"hysteresis": 0.01, "time_jitter": 0.02,
-                    "drift": 2e-4 / duration * min(1.0, _DISPERSION_CYCLES / n_cycles)}
+    ratio = min(1.0, _DISPERSION_CYCLES / max(duration * init["f_hz"], 1.0))
+    shrink = np.sqrt(ratio)
+    effect_scale = {"hysteresis": 0.01, "time_jitter": 0.02, "drift": 2e-4 / duration * ratio}
     x0 = np.array([init["A12"] / step, init["E_b"] / step, init["f_hz"], init["phase"],
                    log_sigma0] + [0.0] * (2 * len(harmonics))
                   + [effect_x0[n] for n in effect_names])
