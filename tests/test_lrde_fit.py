@@ -237,22 +237,68 @@ def test_chains_go_on_until_converged_up_to_max_steps():
 
 
 def test_before_and_after_fits_side_by_side_equal_the_sequential_ones():
-    """The pipeline's two emcee fits in a forked worker give the same chains as in turn."""
+    """The pipeline's emcee fits in forked workers give the same chains as in turn."""
     from enclab.lrde import pipeline
 
     df, _ = _log(23, n_cycles=4)
     t, c = df["t"].to_numpy(), df["counts"].to_numpy()
     small = {"n_ensembles": 2, "n_walkers": 16, "n_steps": 50, "n_burn": 10}
     rich = dict(small, harmonics=(3,), effects=("hysteresis",))
-    # Fresh seed sequences per run: spawning children advances a SeedSequence.
-    one = pipeline._run_fits(t, c, STEP, (np.random.SeedSequence(1), small),
-                             (np.random.SeedSequence(2), rich), threads=1)
-    two = pipeline._run_fits(t, c, STEP, (np.random.SeedSequence(1), small),
-                             (np.random.SeedSequence(2), rich), threads=2)
-    for a, b in zip(one, two):
+    other = dict(small, harmonics=(3,))
+
+    def jobs():
+        # Fresh seed sequences per run: spawning children advances a SeedSequence.
+        return [(np.random.SeedSequence(1), small), (np.random.SeedSequence(3), other),
+                (np.random.SeedSequence(2), rich)]
+
+    one = pipeline._run_fits(t, c, STEP, jobs(), threads=1)
+    two = pipeline._run_fits(t, c, STEP, jobs(), threads=2)
+    three = pipeline._run_fits(t, c, STEP, jobs(), threads=3)
+    for a, b, d in zip(one, two, three):
         np.testing.assert_array_equal(a.chains, b.chains)
+        np.testing.assert_array_equal(a.chains, d.chains)
         assert a.summary == b.summary and a.param_names == b.param_names
-    assert one[1].param_names[-1] == "hysteresis"
+    assert [r.param_names[5:] for r in one] == [(), ("c3", "s3"), ("c3", "s3", "hysteresis")]
+
+
+def _stub_fit(samples, b=None, centre=0.0, converged=True, harmonics=()):
+    n = samples.shape[0]
+    a_eq = (centre + 0.5) * STEP + samples[:, 1]
+    diag = {k: 1.0 for k in fit.PARAM_NAMES}
+    return fit.FitResult(
+        param_names=fit.PARAM_NAMES, samples=samples, chains=None, a_eq_samples=a_eq,
+        summary={}, offset_a=None, bias_b=None, reason="r", tau=dict(diag, A12=5.0),
+        rhat=dict(diag, A12=1.002), ess=dict(diag, A12=4000.0 + n), converged=converged,
+        step=STEP, centre_count=centre, steps_pp=4, t_ref=0.0, init={}, acceptance=0.3,
+        wall_time_s=1.0, settings={"n_walkers": 16, "harmonics": list(harmonics)},
+        b_samples=None if b is None else np.full(n, b))
+
+
+def test_pooled_posterior_is_the_equal_weight_mixture_of_the_fits():
+    rng = np.random.default_rng(4)
+    x = rng.standard_normal((4000, 5)) * 1e-4
+    y = rng.standard_normal((2000, 5)) * 1e-4 + 3e-4
+    a, b = _stub_fit(x, b=1e-3), _stub_fit(y, b=1e-3, converged=False, harmonics=(3,))
+    pooled = fit.pool_fits([a, b])
+    # Equal shares: every other sample of the longer fit, all of the shorter one.
+    both = np.concatenate((x[np.round(np.linspace(0, 3999, 2000)).astype(int)], y))
+    for j, name in enumerate(fit.PARAM_NAMES):
+        q05, q50, q95 = np.quantile(both[:, j], [0.05, 0.5, 0.95])
+        assert pooled.summary[name] == {"median": q50, "q05": q05, "q95": q95}
+    # An equal mixture's 5 % point lies between those of its parts.
+    assert np.quantile(x[:, 0], 0.05) < pooled.summary["A12"]["q05"] < np.quantile(y[:, 0], 0.05)
+    a_eq = 0.5 * STEP + both[:, 1]
+    assert pooled.summary["offset_a"]["median"] == pytest.approx(np.median(a_eq) - 1e-3)
+    assert pooled.bias_b["q05"] == pooled.bias_b["q95"] == pytest.approx(1e-3)
+    assert pooled.settings["pooled"] == ["sinusoid", "harmonic3"]
+    assert pooled.settings["n_walkers"] == 16 and pooled.harmonics == ()
+    assert not pooled.converged and pooled.ess["A12"] == 6000.0
+    # Without b in every fit the offset is not identified; fits of other logs are refused.
+    assert fit.pool_fits([a, _stub_fit(y)]).offset_a is None
+    with pytest.raises(ValueError, match="different logs"):
+        fit.pool_fits([a, _stub_fit(y, centre=1.0)])
+    with pytest.raises(ValueError, match="at least two"):
+        fit.pool_fits([a])
 
 
 @pytest.mark.parametrize("amplitude_steps", [0.0, 0.3, 2.7, 40.0, 310.0])

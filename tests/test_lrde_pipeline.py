@@ -270,3 +270,43 @@ def test_an_effect_found_against_the_truth_channel_enters_the_fit():
     assert "Added to the fit from its findings: hysteresis" in md
     assert "latency (truth channel): no term here" in md
     json.dumps(block)
+
+
+def _harmonic_log(seed, n_cycles=12):
+    """The readings of a sinusoid with a small 3rd harmonic (0.02-0.04 step), coarse channel
+    only."""
+    from enclab.lrde import effects
+
+    rng = np.random.default_rng(seed)
+    amp = (0.02 + 0.02 * rng.random()) * STEP
+    angle = rng.uniform(0.0, 2.0 * np.pi)
+    t = np.arange(int(n_cycles * 2000.0 / 20.3)) / 2000.0
+    counts = effects.simulate_counts(rng, t, STEP, 3.7 * STEP, 0.55 * STEP, 20.3, 0.4,
+                                     noise_std=0.005 * STEP,
+                                     harmonics={3: (amp * np.cos(angle), amp * np.sin(angle))})
+    meta = {"log_id": "sim_harmonic", "channels": [
+        {"name": "coarse", "role": "measured", "joint": 1, "unit": "rad", "storage": "counts",
+         "step": STEP}]}
+    return pd.DataFrame({"t": t, "coarse": counts}), meta
+
+
+@pytest.mark.slow
+def test_models_the_comparison_cannot_tell_apart_are_pooled_in_the_reported_estimates():
+    """A 3rd harmonic of 0.02 step that the comparison takes for a dead band, with the
+    harmonic within two standard errors: both models are fitted and the headline estimates
+    are their equal-weight pool, while ``after`` stays the pick's own posterior."""
+    df, meta = _harmonic_log(25)
+    settings = dict(FAST, motion_models=[[], [3]], effects=["hysteresis"], effect_pairs=False)
+    block, _, md, _ = pipeline.analyse_lrde_log(df, meta, seed=2, settings=settings)
+    m = block["model"]
+    assert (m["chosen"], m["indistinguishable"]) == ("hysteresis", ["harmonic3"])
+    assert m["averaged_over"] == ["hysteresis", "harmonic3"]
+    assert block["averaged"]["models"] == ["hysteresis", "harmonic3"]
+    assert block["after"]["model"] == "hysteresis"
+    for key in ("A12", "E_b", "a_eq", "f_hz"):
+        assert block[key] == block["averaged"][key]
+    assert block["A12"] != block["after"]["A12"]
+    assert "pool the posteriors of hysteresis and harmonic3" in m["note"]
+    assert "These estimates pool the posteriors of hysteresis and harmonic3" in md
+    assert "reported (averaged: hysteresis, harmonic3)" in md
+    json.dumps(block)

@@ -18,10 +18,12 @@ noise          position noise U(0.005, 0.1) step                 sinusoid
 
 Per draw the stage's own steps run: the effect comparison
 (:func:`enclab.lrde.compare.compare_effect_models`), the sinusoid's emcee fit (``before``) and,
-when the comparison chooses a model, that model's emcee fit (``after``), with the sampler
-settings of ``config.yaml`` (``--n-walkers`` etc.). Recorded: the chosen model, whether it names the right
-term, the predictive check, 90 % intervals of ``A12`` and ``E_b`` before and after (``E_b``
-relative to count 0 in the frame of the longer segment for a jump), convergence and wall time.
+when the comparison chooses a model, that model's emcee fit and one of each model it cannot
+tell from it, pooled with equal weights as the stage reports them (``after``), with the sampler
+settings of ``config.yaml`` (``--n-walkers`` etc.). Recorded: the chosen model, whether it names
+the right term, the predictive check, 90 % intervals of ``A12`` and ``E_b`` before and after
+(``E_b`` relative to count 0 in the frame of the longer segment for a jump) and of the pick's
+own fit (``pick``, the same as ``after`` unless pooled), convergence and wall time.
 
 A draw's effect is *named* when the chosen model contains its term, and *identified* when it
 is named or the comparison lists its term among the models not distinguishable from the pick
@@ -32,7 +34,8 @@ Summary per (cycles, case): ``n``; named and identified rates with Wilson 95 % i
 detection threshold (the size at which a logistic fit of identified vs log size crosses 50 %)
 and the named and identified rates among draws of at least 3x that size; coverage of the 90 %
 intervals before and after; the rate of converged, trusted intervals that miss the truth by
-more than their own width; the median wall time. A row ``case = all`` per cycle count pools
+more than their own width; the share of draws whose ``after`` is pooled; the median wall
+time. A row ``case = all`` per cycle count pools
 every case for the confident-miss rate.
 
 Usage::
@@ -125,7 +128,7 @@ def one_draw(case, n_cycles, seed, sampler):
     rng = np.random.default_rng(seed)
     t, counts, truth = simulate_case(rng, case, n_cycles)
     root = np.random.SeedSequence(seed)
-    fit_seed, compare_seed, after_seed = root.spawn(3)
+    fit_seed, compare_seed, after_seed, alternatives_seed = root.spawn(4)
     started = time.perf_counter()
     row = {"case": case, "cycles": n_cycles, "seed": seed, "size": truth["size"],
            "A12_true": truth["A12"], "E_b_true": truth["E_b"]}
@@ -137,13 +140,22 @@ def one_draw(case, n_cycles, seed, sampler):
     # As the stage: the sinusoid's ensembles start at its point fit.
     before = fit.fit_sinusoid(t, counts, STEP, fit_seed, start=comp["full_fits"]["sinusoid"]["x"],
                               **sampler)
-    after = before
+    after = pick = before
     if comp["chosen"] != "sinusoid":
         point = comp["full_fits"][comp["chosen"]]
-        after = fit.fit_sinusoid(t, counts, STEP, after_seed,
-                                 harmonics=tuple(comp["chosen_harmonics"]),
-                                 effects=tuple(comp["chosen_effects"]), start=point["x"],
-                                 **sampler)
+        after = pick = fit.fit_sinusoid(t, counts, STEP, after_seed,
+                                        harmonics=tuple(comp["chosen_harmonics"]),
+                                        effects=tuple(comp["chosen_effects"]), start=point["x"],
+                                        **sampler)
+        labels = comp["indistinguishable"]
+        alternatives = []
+        for label, seed_alt in zip(labels, alternatives_seed.spawn(len(labels))):
+            entry = next(m for m in comp["models"] if m["label"] == label)
+            alternatives.append(fit.fit_sinusoid(
+                t, counts, STEP, seed_alt, harmonics=tuple(entry["harmonics"]),
+                effects=tuple(entry["effects"]), start=comp["full_fits"][label]["x"], **sampler))
+        if alternatives:
+            after = fit.pool_fits([pick] + alternatives)
     row["wall_s"] = time.perf_counter() - started
     right = RIGHT[case]
     terms = comp["chosen"].split("+")
@@ -156,7 +168,8 @@ def one_draw(case, n_cycles, seed, sampler):
             "identified": named or (right is not None and right in alternatives),
             "check_z": comp["check"]["z"], "trusted": comp["check"]["trusted"],
             "before_converged": before.converged, "after_converged": after.converged}
-    for label, r in (("before", before), ("after", after)):
+    row["pooled"] = after is not pick
+    for label, r in (("before", before), ("after", after), ("pick", pick)):
         for name in ("A12", "E_b"):
             lo, hi = _interval(r, name)
             true = truth[name]
@@ -222,6 +235,9 @@ def summarise(draws: pd.DataFrame) -> pd.DataFrame:
         row["confident_miss_rate"] = (g["A12_after_confident_miss"]
                                       | g["E_b_after_confident_miss"]).mean()
         row["untrusted_rate"] = (~g["trusted"].astype(bool)).mean()
+        # Runs before the pooled report have no such column: their "after" is the pick's.
+        row["pooled_rate"] = (g["pooled"].astype(bool).mean() if "pooled" in g
+                              and g["pooled"].notna().all() else np.nan)
         row["converged_after"] = g["after_converged"].mean()
         row["median_wall_s"] = g["wall_s"].median()
         row["confused_with"] = "|".join(sorted(set(g.loc[~g["named"].astype(bool),

@@ -355,7 +355,8 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
         ``delta_over_chosen, se_over_chosen``), ``chosen`` (label), ``chosen_harmonics``,
         ``chosen_effects``, ``indistinguishable`` (labels), ``check`` ``{z, observed,
         sim_mean, sim_sd, trusted}``, ``n_cycles``, ``rule``, ``full_fits`` (label -> point
-        fit of the whole log).
+        fit of the whole log; the sinusoid, every model tried on the full log, the chosen one
+        and each indistinguishable one).
     """
     t = np.asarray(t, dtype=float)
     counts = np.asarray(counts)
@@ -484,6 +485,9 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
     chosen_h, chosen_e = tuple(best["harmonics"]), tuple(best["effects"])
     if best["label"] != "sinusoid":
         full_fit(best["label"], chosen_h, chosen_e)
+    for label in indistinguishable:
+        (h, e), _ = results[label]
+        full_fit(label, h, e)
     return {"models": models, "chosen": best["label"], "chosen_harmonics": list(chosen_h),
             "chosen_effects": list(chosen_e), "delta_bic": best["delta_bic"],
             "indistinguishable": indistinguishable, "n_cycles": int(n_cycles),

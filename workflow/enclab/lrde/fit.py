@@ -69,7 +69,7 @@ from enclab.lrde import effects as lrde_effects
 from enclab.lrde.model import _phasor_on_grid, _sine_on_grid, uniform_grid
 
 __all__ = ["PARAM_NAMES", "FitResult", "log_likelihood", "log_probability", "initial_guess",
-           "fit_sinusoid", "truth_rounding_bound"]
+           "fit_sinusoid", "pool_fits", "truth_rounding_bound"]
 
 PARAM_NAMES = ("A12", "E_b", "f_hz", "phase", "sigma")
 _HARMONIC_BOUND = 0.5  # |c_k|, |s_k| < step / 2: distortion well below the stroke
@@ -293,8 +293,9 @@ class FitResult:
         ``("A12", "E_b", "f_hz", "phase", "sigma")``.
     samples : numpy.ndarray, shape (n_samples, 5)
         Pooled post-burn-in samples of all ensembles (columns as ``param_names``).
-    chains : numpy.ndarray, shape (n_ensembles, n_steps, n_walkers, 5)
-        The same, per ensemble and step (SI units).
+    chains : numpy.ndarray, shape (n_ensembles, n_steps, n_walkers, 5), or None
+        The same, per ensemble and step (SI units); None for a pooled posterior
+        (:func:`pool_fits`).
     a_eq_samples : numpy.ndarray
         ``a_eq = (centre_count + 1/2) step + E_b`` per sample.
     summary : dict
@@ -311,6 +312,9 @@ class FitResult:
         ``tau``).
     converged : bool
         ``max R-hat <= 1.01`` and ``min ESS >= 1000``.
+    b_samples : numpy.ndarray or None
+        Draws of the bias ``b`` paired with ``a_eq_samples`` when it is identified (truth
+        channel or rest position), else None.
     """
 
     param_names: tuple
@@ -333,6 +337,7 @@ class FitResult:
     acceptance: float
     wall_time_s: float
     settings: dict = field(default_factory=dict)
+    b_samples: np.ndarray | None = None
 
     @property
     def harmonics(self) -> tuple:
@@ -738,7 +743,7 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
     a_eq = (centre + 0.5) * step + samples[:, 1]
     summary = {name: _quantiles(samples[:, i]) for i, name in enumerate(names)}
     summary["a_eq"] = _quantiles(a_eq)
-    offset_a = bias_b = None
+    offset_a = bias_b = b_draws = None
     reason = _UNIDENTIFIED
     if truth is not None:
         truth = np.asarray(truth, dtype=float)
@@ -771,6 +776,7 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
         if not (np.isscalar(rest_position) and np.isfinite(rest_position)):
             raise ValueError(f"rest_position must be a finite scalar (rad), got {rest_position!r}")
         b = float(rest_position)
+        b_draws = np.full(a_eq.size, b)
         bias_b = {"median": b, "q05": b, "q95": b}
         offset_a = _quantiles(a_eq - b)
         reason = "bias b = the known rest position, offset a = a_eq - b"
@@ -787,7 +793,77 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
                   "n_burn": n_burn, "bounds_internal": bounds.tolist(),
                   "harmonics": list(harmonics), "effects": list(effects),
                   "extra_scale": list(setup["extra_scale"]), "sigma_prior": sigma_prior},
+        b_samples=b_draws,
     )
+
+
+def pool_fits(fits) -> FitResult:
+    """One posterior of ``A12, E_b, f_hz, phase, sigma`` from the fits of several models, with
+    equal weights.
+
+    Model averaging for models the readings cannot tell apart: each fit contributes the same
+    number of samples (evenly spaced over its pooled samples), so the reported intervals cover
+    what every model allows instead of following the one picked by a margin inside the noise.
+    Equal weights are the prior-odds answer when the held-out scores do not separate the
+    models; weights from the scores' difference would go on favouring the pick on evidence
+    the comparison itself called inconclusive.
+
+    Parameters
+    ----------
+    fits : sequence of FitResult
+        Fits of one log (same step, centre count and time origin); the first one's
+        identification (``reason``) is kept.
+
+    Returns
+    -------
+    FitResult
+        ``samples`` with the five common columns, ``chains`` None, ``offset_a``/``bias_b``
+        from the pooled ``a_eq - b`` when every fit identifies them, diagnostics the worst over
+        the fits (largest ``tau`` and R-hat, smallest ESS), ``converged`` when all are,
+        ``settings`` the first fit's sampler settings and ``"pooled"``, the model labels
+        (``"+"``-joined terms, ``"sinusoid"``).
+
+    Raises
+    ------
+    ValueError
+        When fewer than two fits are given or they describe different logs.
+    """
+    fits = list(fits)
+    if len(fits) < 2:
+        raise ValueError(f"pool_fits needs at least two fits, got {len(fits)}")
+    first = fits[0]
+    for f in fits[1:]:
+        if (f.step, f.centre_count, f.t_ref) != (first.step, first.centre_count, first.t_ref):
+            raise ValueError("pool_fits: the fits describe different logs (step, centre count "
+                             "or time origin differ)")
+    n = min(f.samples.shape[0] for f in fits)
+    picks = [np.round(np.linspace(0, f.samples.shape[0] - 1, n)).astype(np.int64) for f in fits]
+    names = PARAM_NAMES
+    samples = np.concatenate([f.samples[i, :len(names)] for f, i in zip(fits, picks)])
+    a_eq = np.concatenate([f.a_eq_samples[i] for f, i in zip(fits, picks)])
+    summary = {name: _quantiles(samples[:, j]) for j, name in enumerate(names)}
+    summary["a_eq"] = _quantiles(a_eq)
+    b = None
+    offset_a = bias_b = None
+    if all(f.b_samples is not None for f in fits):
+        b = np.concatenate([f.b_samples[i] for f, i in zip(fits, picks)])
+        bias_b, offset_a = _quantiles(b), _quantiles(a_eq - b)
+        summary["offset_a"], summary["bias_b"] = offset_a, bias_b
+    labels = ["+".join([f"harmonic{k}" for k in f.harmonics] + list(f.effects)) or "sinusoid"
+              for f in fits]
+    return FitResult(
+        param_names=names, samples=samples, chains=None, a_eq_samples=a_eq, summary=summary,
+        offset_a=offset_a, bias_b=bias_b, reason=first.reason if b is not None else _UNIDENTIFIED,
+        tau={k: max(f.tau[k] for f in fits) for k in names},
+        rhat={k: max(f.rhat[k] for f in fits) for k in names},
+        ess={k: min(f.ess[k] for f in fits) for k in names},
+        converged=all(f.converged for f in fits), step=first.step,
+        centre_count=first.centre_count, steps_pp=first.steps_pp, t_ref=first.t_ref,
+        init=first.init, acceptance=float(np.mean([f.acceptance for f in fits])),
+        wall_time_s=float(sum(f.wall_time_s for f in fits)),
+        settings={k: v for k, v in first.settings.items()
+                  if k not in ("harmonics", "effects", "extra_scale", "bounds_internal")}
+        | {"pooled": labels}, b_samples=b)
 
 
 def map_fit(t, counts, step, f_hz=None, harmonics=(), effects=(), start=None,

@@ -28,8 +28,11 @@ see :func:`enclab.lrde.compare.compare_effect_models`.
 
 The paper's sinusoid is fitted first (``before``); when the comparison chooses a model with
 an added term, that model is fitted the same way and its posterior gives the reported
-``A12``, ``E_b``, ``a_eq``, ``offset_a``, ``bias_b`` (``after``); ``trust`` says per quantity
-whether it can be relied on and why not. With a truth channel, what the residual stage found on
+``A12``, ``E_b``, ``a_eq``, ``offset_a``, ``bias_b`` (``after``). When the comparison names
+models it cannot tell from its pick (``model.indistinguishable``), each of them is fitted too and
+the reported estimates pool all their posteriors with equal weights (``averaged``,
+:func:`enclab.lrde.fit.pool_fits`; ``after`` stays the pick's own). ``trust`` says per
+quantity whether it can be relied on and why not. With a truth channel, what the residual stage found on
 the coarse channel (``references``) joins the final model and is set against its terms
 (``model.reference``).
 """
@@ -96,18 +99,36 @@ def _fit(t, counts, step, seed, kwargs):
     return fit.fit_sinusoid(t, counts, step, seed, **kwargs)
 
 
-def _run_fits(t, counts, step, before, after, threads):
-    """The ``before`` fit and, when ``after`` is given, the ``after`` fit (``(seed, kwargs)``
-    each); side by side in a forked worker process when ``threads >= 2``."""
-    if after is None or threads < 2 or "fork" not in mp.get_all_start_methods():
-        return (_fit(t, counts, step, *before),
-                None if after is None else _fit(t, counts, step, *after))
+def _run_fits(t, counts, step, jobs, threads):
+    """The emcee fits of ``jobs`` (``(seed, kwargs)`` each), in order; with ``threads >= 2``
+    all but the last run in forked worker processes beside it."""
+    if len(jobs) < 2 or threads < 2 or "fork" not in mp.get_all_start_methods():
+        return [_fit(t, counts, step, *job) for job in jobs]
     with concurrent.futures.ProcessPoolExecutor(
-            max_workers=1, mp_context=mp.get_context("fork")) as pool:
-        # The longer fit (the richer model) stays in this process.
-        pending = pool.submit(_fit, t, counts, step, *before)
-        chosen = _fit(t, counts, step, *after)
-        return pending.result(), chosen
+            max_workers=min(threads - 1, len(jobs) - 1),
+            mp_context=mp.get_context("fork")) as pool:
+        # The last fit (the chosen, richest model) stays in this process.
+        pending = [pool.submit(_fit, t, counts, step, *job) for job in jobs[:-1]]
+        last = _fit(t, counts, step, *jobs[-1])
+        return [p.result() for p in pending] + [last]
+
+
+def _alternative_kwargs(t, counts, step, comparison, added, common, settings):
+    """Sampler arguments of each model the comparison could not tell from its pick (with the
+    truth channel's added effects, like the pick)."""
+    out = []
+    for label in (comparison or {}).get("indistinguishable", []):
+        entry = next(m for m in comparison["models"] if m["label"] == label)
+        harmonics, own = tuple(entry["harmonics"]), tuple(entry["effects"])
+        effects = own + tuple(e for e in added if e not in own)
+        point = comparison["full_fits"][label]
+        if effects != own:
+            point = fit.map_fit(t, counts, step, f_hz=settings.get("f_hz"), harmonics=harmonics,
+                                effects=effects, start=point["x"],
+                                sigma_range=settings.get("sigma_range_steps"),
+                                sigma_prior=settings.get("sigma_prior", "uniform"))
+        out.append({"harmonics": harmonics, "effects": effects, "start": point["x"], **common})
+    return out
 
 
 def select_channels(df: pd.DataFrame, meta: dict, settings: dict):
@@ -217,7 +238,7 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
     cycles = dwell.cycle_table(counts, t, step, f_hz=f_hz)
     summary = dwell.dwell_summary(cycles)
     root = np.random.SeedSequence(seed)
-    fit_seed, ppc_seed, compare_seed, after_seed = root.spawn(4)
+    fit_seed, ppc_seed, compare_seed, after_seed, alternatives_seed = root.spawn(5)
     # The comparison first: its point fit of the sinusoid starts the ensembles near the
     # posterior, so that a short burn-in suffices.
     model_block, comparison = _compare_effects(t, counts, step, compare_seed, settings)
@@ -243,11 +264,20 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
                             sigma_prior=settings.get("sigma_prior", "uniform"))
     elif harmonics or chosen:
         point = comparison["full_fits"][comparison["chosen"]]
+    jobs = [(fit_seed, before_kw)]
     if point is not None:
         after_kw = {"harmonics": harmonics, "effects": chosen + tuple(added),
                     "start": point["x"], **common}
-    result, chosen_fit = _run_fits(t, counts, step, (fit_seed, before_kw),
-                                   None if after_kw is None else (after_seed, after_kw), threads)
+        alternatives = _alternative_kwargs(t, counts, step, comparison, added, common,
+                                           settings)
+        jobs += list(zip(alternatives_seed.spawn(len(alternatives)), alternatives))
+        jobs.append((after_seed, after_kw))
+    fits = _run_fits(t, counts, step, jobs, threads)
+    result = fits[0]
+    chosen_fit = fits[-1] if after_kw is not None else None
+    # Models the held-out comparison cannot tell from the pick: their posteriors are pooled
+    # with its own (equal weights), so the reported intervals do not hang on the pick.
+    averaged = fit.pool_fits([chosen_fit] + fits[1:-1]) if len(fits) > 2 else None
     # The wall time goes to the log, not the block: summary.json must be byte-reproducible.
     _log.info("emcee fit: %.1f s wall, acceptance %.2f", result.wall_time_s, result.acceptance)
     before = result
@@ -279,12 +309,18 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
             result = chosen_fit
     if reference is not None:
         model_block["reference"] = report.reference_block(reference, model_block, added)
-    block = report.summary_block(result, summary)
+    reported = averaged if averaged is not None else result
+    if averaged is not None:
+        model_block["averaged_over"] = list(averaged.settings["pooled"])
+        model_block["note"] = report.averaged_note(model_block)
+    block = report.summary_block(reported, summary)
     block["channels"] = info
     block["model"] = model_block
     block["before"] = report.estimates_block(before)
     block["after"] = report.estimates_block(result)
-    block["trust"] = report.trust_block(result, model_block)
+    if averaged is not None:
+        block["averaged"] = report.estimates_block(averaged)
+    block["trust"] = report.trust_block(reported, model_block)
     residuals = report.effect_residuals_block(model_block)
     if residuals is not None:
         block["residuals"] = residuals

@@ -153,11 +153,18 @@ _ESTIMATES = ("A12", "E_b", "a_eq", "f_hz", "offset_a", "bias_b")
 
 
 def estimates_block(fit) -> dict:
-    """``A12, E_b, a_eq, f_hz, offset_a, bias_b`` of one fit (triples or None) and its model."""
+    """``A12, E_b, a_eq, f_hz, offset_a, bias_b`` of one fit (triples or None) and its model
+    (for a pooled posterior, :func:`enclab.lrde.fit.pool_fits`, ``"averaged: <labels>"`` and
+    ``models``)."""
     s = fit.summary
     out = {k: _triple(s.get(k)) for k in _ESTIMATES}
-    out["model"] = "+".join([f"harmonic{k}" for k in fit.harmonics] + list(fit.effects)) \
-        or "sinusoid"
+    pooled = fit.settings.get("pooled")
+    if pooled:
+        out["model"] = "averaged: " + ", ".join(pooled)
+        out["models"] = list(pooled)
+    else:
+        out["model"] = "+".join([f"harmonic{k}" for k in fit.harmonics] + list(fit.effects)) \
+            or "sinusoid"
     out["converged"] = bool(fit.converged)
     return out
 
@@ -197,6 +204,17 @@ def effect_model_block(comparison: dict | None, chosen_fit=None, reason: str | N
                    "standard errors); the estimates are those of the chosen model")
     out["params"] = effect_params(chosen_fit, duration_s, jump)
     return out
+
+
+def averaged_note(model_block: dict) -> str:
+    """The ``note`` of a ``model`` block whose estimates pool the chosen model's posterior with
+    those of the models it is not distinguishable from."""
+    models = model_block["averaged_over"]
+    return (f"{model_block['chosen']} is not distinguishable from "
+            f"{', '.join(model_block['indistinguishable'])} on held-out cycles (within two "
+            f"standard errors); the reported estimates pool the posteriors of "
+            f"{', '.join(models[:-1])} and {models[-1]} with equal weights ('after' is "
+            f"{model_block['chosen']} alone)")
 
 
 def effect_params(chosen_fit=None, duration_s: float | None = None,
@@ -367,6 +385,12 @@ def report_markdown(block: dict, log_id: str | None = None) -> str:
         "",
         f"Identifiability: {block['reason']}.", "",
     ]
+    averaged = block.get("averaged")
+    if averaged:
+        models = averaged["models"]
+        lines[-1:-1] = ["", f"These estimates pool the posteriors of {', '.join(models[:-1])} "
+                        f"and {models[-1]} (equal weights): the held-out comparison cannot tell "
+                        "these models apart."]
     dwell_a12 = block["dwell_formula_A12"]
     lines.append("Eq. (4) baseline (mean dwell half-widths): "
                  + (f"{dwell_a12 * deg:.4f} deg." if dwell_a12 is not None
@@ -430,10 +454,15 @@ def _before_after_lines(block: dict) -> list[str]:
     before, after = block.get("before"), block.get("after")
     if not (before and after) or before["model"] == after["model"]:
         return []
-    lines = ["", f"| quantity | before (sinusoid) | after ({after['model']}) |", "|---|---|---|"]
+    columns = [("before (sinusoid)", before), (f"after ({after['model']})", after)]
+    if block.get("averaged"):
+        columns.append((f"reported ({block['averaged']['model']})", block["averaged"]))
+    lines = ["", "| quantity | " + " | ".join(c[0] for c in columns) + " |",
+             "|---|" + "---|" * len(columns)]
     for key, label in (("A12", "stroke A12"), ("E_b", "E_b"), ("a_eq", "a_eq"),
                        ("offset_a", "offset a"), ("bias_b", "bias b")):
-        lines.append(f"| {label} | {_fmt_deg(before.get(key))} | {_fmt_deg(after.get(key))} |")
+        lines.append(f"| {label} | " + " | ".join(_fmt_deg(c[1].get(key)) for c in columns)
+                     + " |")
     return lines
 
 
