@@ -130,6 +130,37 @@ def test_slow_drift_apply_matches_its_legendre_definition():
     got = d.apply(np.zeros(t.size), t, None, aux, np.array([1.0, 2.0, 3.0]))
     want = 1.0 * s + 2.0 * 0.5 * (3 * s**2 - 1) + 3.0 * 0.5 * (5 * s**3 - 3 * s)
     assert np.allclose(got, want, atol=1e-12)
+    # The reduced form is the linear term alone.
+    linear = d.reduced()
+    assert linear.param_names == ("c1",) and linear.reduced() is None
+    assert np.allclose(linear.apply(np.zeros(t.size), t, None, aux, np.array([1.0])), s, atol=1e-12)
+    assert linear.derived({"c1": 1.0})["peak_to_peak"] == pytest.approx(2.0)
+    with pytest.raises(ValueError, match="degree"):
+        fx.SlowDrift(degree=4)
+
+
+def test_on_a_steadily_rotating_axis_a_linear_drift_is_named_beside_a_scale():
+    """The angle of a steady rotation is a ramp in time: a linear drift of the reading and a
+    scale mismatch read the log alike. Whichever is chosen, the other is reported as not
+    distinguishable; the drift in its linear form (the three-term form loses by its two
+    extra parameters' BIC penalty alone)."""
+    rng = np.random.default_rng(0)
+    rate, duration = 2e-4, 10.0
+
+    def motion(t):
+        return 0.3 + 2 * np.pi * (0.8 * t + 0.01 * np.sin(np.pi * t))
+
+    log = simulate_log(rng, motion, duration=duration, step=STEP, truth_step=TRUTH_STEP,
+                       effects={"slow_drift": {"rate": rate, "quad": 0.0}})
+    res = select_effects(log["t"], log["truth"], log["measured"], STEP, truth_step=TRUTH_STEP)
+    (e,) = res.effects
+    assert e.name in ("scale_mismatch", "slow_drift")
+    if e.name == "scale_mismatch":
+        (alt,) = [a for a in e.indistinguishable if a["name"] == "slow_drift"]
+        assert set(alt["params"]) == {"c1"}
+        assert alt["params"]["c1"] == pytest.approx(rate * duration / 2, rel=0.05)
+    else:
+        assert "scale_mismatch" in [a["name"] for a in e.indistinguishable]
 
 
 def test_every_effect_has_a_range_that_holds_its_null():

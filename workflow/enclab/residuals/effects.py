@@ -223,6 +223,15 @@ class Effect:
         """Extra derived quantities for reports (e.g. amplitude and phase)."""
         return {}
 
+    def reduced(self):
+        """The same effect with fewer parameters (its leading terms), or None.
+
+        An alternative is weighed against a chosen effect at matched complexity too: a
+        three-term drift loses to a one-parameter scale by its two extra parameters' BIC
+        penalty even where its linear term alone reads the log as well (a steadily rotating
+        axis, whose angle is a ramp in time)."""
+        return None
+
     #: The motion that tells this effect apart from others it can trade off against (words).
     separated_by = "a longer, more varied motion"
 
@@ -766,10 +775,19 @@ class SlowDrift(Effect):
 
     name = "slow_drift"
     additive = True
-    param_names = ("c1", "c2", "c3")
     order = 25
 
     separated_by = "passes over the same angles spread over the whole log"
+
+    def __init__(self, degree: int = 3):
+        if degree not in (1, 2, 3):
+            raise ValueError(f"SlowDrift degree must be 1, 2 or 3, got {degree!r}")
+        self.degree = degree
+        self.param_names = ("c1", "c2", "c3")[:degree]
+
+    def reduced(self):
+        """The linear drift alone (``c1``)."""
+        return SlowDrift(degree=1) if self.degree > 1 else None
 
     def applicable(self, ctx) -> bool:
         self.duration = float(ctx.t[-1] - ctx.t[0])
@@ -778,14 +796,16 @@ class SlowDrift(Effect):
     def _basis(self, t, aux):
         t0, t1 = aux["_t_range"]
         s = (2.0 * np.asarray(t, dtype=float) - (t0 + t1)) / (t1 - t0)
-        return s, 0.5 * (3.0 * s * s - 1.0), 0.5 * (5.0 * s**3 - 3.0 * s)
+        return (s, 0.5 * (3.0 * s * s - 1.0), 0.5 * (5.0 * s**3 - 3.0 * s))[:self.degree]
 
     def apply(self, theta, t, velocity, aux, params):
-        p1, p2, p3 = self._basis(t, aux)
-        return theta + params[0] * p1 + params[1] * p2 + params[2] * p3
+        out = theta
+        for c, basis in zip(params, self._basis(t, aux)):
+            out = out + c * basis
+        return out
 
     def derived(self, params):
-        c1, c2, c3 = params["c1"], params["c2"], params["c3"]
+        c1, c2, c3 = (params.get(k, 0.0) for k in ("c1", "c2", "c3"))
         s = np.linspace(-1.0, 1.0, 401)
         curve = c1 * s + c2 * 0.5 * (3 * s * s - 1) + c3 * 0.5 * (5 * s**3 - 3 * s)
         out = {"peak_to_peak": float(np.ptp(curve))}

@@ -51,7 +51,11 @@ resolves, a latency and a hysteresis on a motion that reverses quickly, a scale 
 the linear part of an angle harmonic over a short stroke. For each chosen effect the final
 model is refitted with the effect *swapped* for each close alternative (the continuous
 candidates within ``3 * distinguish_bic`` of it at the step it was chosen, and that step's
-runner-up), giving the swap-in ``delta_bic = BIC(swapped) - BIC(chosen)``. An alternative with
+runner-up), giving the swap-in ``delta_bic = BIC(swapped) - BIC(chosen)``; an alternative with a
+reduced form (a drift's linear term alone) is also swapped in as that, and the smaller value
+counts, so that an alternative is not ruled out by parameters the log has no use for (on a
+steadily rotating axis the angle is a ramp in time, and a scale mismatch and a linear drift
+read alike). An alternative with
 a swap-in ``delta_bic`` below ``distinguish_bic`` is *not distinguishable* on this log: the
 choice is reported with it (``FittedEffect.indistinguishable``, the message), never silently.
 The default margin is ``bic_threshold`` (10): an effect is added only on very strong evidence
@@ -531,15 +535,30 @@ def _alternatives(cur: _Fitted, chosen, step_trials, candidates, ctx, margin):
             names.add(max(trial, key=trial.get))
         alts = []
         for name in sorted(names):
-            new = _swap(cur, e, pool[name], ctx)
-            if new is None:
+            best = None
+            for alt in _forms(pool[name], ctx):
+                new = _swap(cur, e, alt, ctx)
+                if new is None:
+                    continue
+                k = new.model.n_params() - cur.model.n_params()
+                d = 2.0 * (cur.ll - new.ll) + k * math.log(n_fit)
+                if best is None or d < best[0]:
+                    best = (d, new, alt)
+            if best is None:
                 continue
-            k = new.model.n_params() - cur.model.n_params()
-            d = 2.0 * (cur.ll - new.ll) + k * math.log(n_fit)
-            i = new.model.effects.index(pool[name])
+            d, new, alt = best
+            i = new.model.effects.index(alt)
             alts.append({"name": name, "delta_bic": float(d), "params": new.model.params_of(new.x, i)})
         out.append(sorted(alts, key=lambda a: a["delta_bic"]))
     return out
+
+
+def _forms(effect, ctx):
+    """``effect`` and its reduced form (:meth:`Effect.reduced`) when it applies to ``ctx``."""
+    yield effect
+    small = effect.reduced()
+    if small is not None and small.applicable(ctx):
+        yield small
 
 
 def _discrete_candidate(name, cur: _Fitted, ctx):
