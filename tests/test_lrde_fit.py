@@ -340,3 +340,13 @@ def test_the_stroke_prior_holds_a_stroke_whose_readings_reach_another_count(A12_
                        terms.get("effects", ()))
     lo, hi = setup["bounds"][0]
     assert lo < A12_steps < hi
+
+
+def test_walkers_are_raised_to_twice_the_parameters_of_a_rich_model():
+    """Two harmonics make nine parameters: 16 walkers per ensemble would leave emcee's
+    ensemble move on a subspace, so the fit takes 18."""
+    df, _ = _log(23, n_cycles=4)
+    r = fit.fit_sinusoid(df["t"].to_numpy(), df["counts"].to_numpy(), STEP, 1, n_ensembles=2,
+                         n_walkers=16, n_steps=50, n_burn=10, harmonics=(2, 3))
+    assert len(r.param_names) == 9
+    assert r.chains.shape[2] == 18 and r.settings["n_walkers"] == 18

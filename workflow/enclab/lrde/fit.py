@@ -71,6 +71,8 @@ from enclab.lrde.model import _phasor_on_grid, _sine_on_grid, uniform_grid
 __all__ = ["PARAM_NAMES", "FitResult", "log_likelihood", "log_probability", "initial_guess",
            "fit_sinusoid", "pool_fits", "truth_rounding_bound"]
 
+_log = logging.getLogger(__name__)
+
 PARAM_NAMES = ("A12", "E_b", "f_hz", "phase", "sigma")
 _HARMONIC_BOUND = 0.5  # |c_k|, |s_k| < step / 2: distortion well below the stroke
 _DISPERSION_CYCLES = 20.0  # log length (cycles) up to which the start dispersion is fixed
@@ -628,7 +630,8 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
         ``SeedSequence(seed).spawn(n_ensembles)`` (a Generator is used to draw the root
         entropy).
     n_ensembles, n_walkers, n_steps, n_burn : int
-        Independent emcee ensembles, walkers per ensemble (>= 10, even), production steps and
+        Independent emcee ensembles, walkers per ensemble (>= 10, even; raised to twice the
+        number of parameters when the model has more than half as many), production steps and
         discarded burn-in steps per ensemble.
     max_steps : int, optional
         When the chains have not converged after ``n_steps`` (R-hat > 1.01 or ESS < 1000),
@@ -703,6 +706,13 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
     harmonics, effects = setup["harmonics"], setup["effects"]
     names, bounds, init, kwargs = setup["names"], setup["bounds"], setup["init"], setup["kwargs"]
     ndim = len(names)
+    if n_walkers < 2 * ndim:
+        # emcee's ensemble moves need at least twice as many walkers as parameters (fewer stay
+        # on a subspace); a model with harmonics and effects can have more than the setting
+        # was chosen for.
+        _log.info("%d walkers per ensemble raised to %d for the %d parameters of %s",
+                  n_walkers, 2 * ndim, ndim, "+".join(names[5:]))
+        n_walkers = 2 * ndim
     K, centre, t_ref = init["steps_pp"], setup["centre"], setup["t_ref"]
     x0, scale = setup["x0"], setup["scale"]
     if start is not None:
