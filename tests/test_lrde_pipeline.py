@@ -174,6 +174,11 @@ def test_run_summary_names_untrusted_lrde_quantities():
         [{"log_id": "l", "warnings": [], "lrde": block}], ["l"], {}, ratios=None,
         violations=None, written={}))
     assert "model hysteresis" in text and f"l: UNTRUSTED A12, E_b: {reason}" in text
+    # Pooled estimates name the models they come from.
+    pooled = dict(block, after={"model": "hysteresis"},
+                  averaged={"model": "averaged: hysteresis, harmonic3"})
+    row = run_report._lrde([{"log_id": "l", "lrde": pooled}])["rows"][0]
+    assert row["model"] == "averaged: hysteresis, harmonic3"
 
 
 def _hysteresis_log(seed, width, n_cycles=40):

@@ -82,7 +82,8 @@ def _lrde(summaries: Sequence[Mapping]) -> dict | None:
         row = {"log_id": s["log_id"], "converged": diag.get("converged"),
                "rhat_max": _num(diag.get("rhat_max")), "ess_min": _num(diag.get("ess_min")),
                "reason": block.get("reason"),
-               "model": (block.get("after") or {}).get("model")
+               # the model the reported quantities come from (pooled: every model)
+               "model": (block.get("averaged") or block.get("after") or {}).get("model")
                or (block.get("model") or {}).get("chosen"),
                "added_from_truth": ((block.get("model") or {}).get("reference") or {}).get(
                    "added") or [],
