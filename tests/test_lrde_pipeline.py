@@ -315,3 +315,6 @@ def test_models_the_comparison_cannot_tell_apart_are_pooled_in_the_reported_esti
     assert "These estimates pool the posteriors of hysteresis and harmonic3" in md
     assert "reported (averaged: hysteresis, harmonic3)" in md
     json.dumps(block)
+    rows = {r["quantity"]: r for r in report.batch_rows("sim_harmonic", block)}
+    assert rows["A12"]["median"] == block["averaged"]["A12"]["median"]
+    assert rows["A12"]["model"] == "averaged: hysteresis, harmonic3"

@@ -551,7 +551,9 @@ def batch_rows(log_id: str, block: dict) -> list[dict]:
     Every row repeats the log's identification and diagnostics so that a row read alone says
     whether it can be trusted: ``log_id, quantity, unit, median, q05, q95, converged,
     rhat_max, ess_min, n_cycles, steps_pp, step, dwell_formula_A12`` (the eq. 4 baseline, on
-    the ``A12`` row only) and ``reason`` (why ``offset_a``/``bias_b`` are missing, if they are).
+    the ``A12`` row only), ``reason`` (why ``offset_a``/``bias_b`` are missing, if they are),
+    ``trusted`` and ``model`` (the chosen model, or ``"averaged: <models>"`` when the values
+    pool several).
     """
     diag = block["diagnostics"]
     rows = []
@@ -567,6 +569,8 @@ def batch_rows(log_id: str, block: dict) -> list[dict]:
             "reason": block["reason"] if quantity in ("offset_a", "bias_b") and not triple
             else None,
             "trusted": ((block.get("trust") or {}).get(quantity) or {}).get("trusted"),
-            "model": (block.get("model") or {}).get("chosen"),
+            # the model the values come from (pooled: every model, see estimates_block)
+            "model": (block.get("averaged") or {}).get("model")
+            or (block.get("model") or {}).get("chosen"),
         })
     return rows
