@@ -157,7 +157,8 @@ def test_on_a_steadily_rotating_axis_a_linear_drift_is_named_beside_a_scale():
     assert e.name in ("scale_mismatch", "slow_drift")
     if e.name == "scale_mismatch":
         (alt,) = [a for a in e.indistinguishable if a["name"] == "slow_drift"]
-        assert set(alt["params"]) == {"c1"}
+        assert set(alt["params"]) == {"c1"} and alt["form"] == "linear"
+        assert "slow_drift (linear; swap-in delta BIC" in res.message
         assert alt["params"]["c1"] == pytest.approx(rate * duration / 2, rel=0.05)
     else:
         assert "scale_mismatch" in [a["name"] for a in e.indistinguishable]

@@ -297,6 +297,13 @@ def test_message_says_unexplained_and_names_indistinguishable_alternatives():
     assert "the rest is unexplained" in msg and "9x the exact-model floor" in msg
     assert "hysteresis not distinguishable from backlash (swap-in delta BIC 1.7)" in msg
     assert "latency" not in msg
+    # A reduced form that reads the log better than the pick says so.
+    better = [{"name": "slow_drift", "delta_bic": -4.2, "params": {"c1": 1e-3}, "form": "linear"}]
+    e = FittedEffect("scale_mismatch", {"g": 4e-5}, {"g": (3.9e-5, 4.1e-5)}, 80.0, 9.0,
+                     alternatives=better)
+    assert ("scale_mismatch not distinguishable from slow_drift (linear; swap-in delta BIC -4.2: "
+            "reads the log better)") in _message([e], True, before, after)
+    assert e.to_dict()["indistinguishable_from"][0]["form"] == "linear"
     assert _message([], False, before).startswith("unexplained: the residual std 0.001 rad is 10x")
 
 

@@ -223,6 +223,9 @@ class Effect:
         """Extra derived quantities for reports (e.g. amplitude and phase)."""
         return {}
 
+    #: What a reduced form (:meth:`reduced`) keeps, in words (None for the full form).
+    form = None
+
     def reduced(self):
         """The same effect with fewer parameters (its leading terms), or None.
 
@@ -784,6 +787,7 @@ class SlowDrift(Effect):
             raise ValueError(f"SlowDrift degree must be 1, 2 or 3, got {degree!r}")
         self.degree = degree
         self.param_names = ("c1", "c2", "c3")[:degree]
+        self.form = {1: "linear", 2: "quadratic", 3: None}[degree]
 
     def reduced(self):
         """The linear drift alone (``c1``)."""

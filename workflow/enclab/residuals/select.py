@@ -141,8 +141,11 @@ class FittedEffect:
 
     def to_dict(self) -> dict:
         def alt(a):
-            return {"name": a["name"], "delta_bic": float(a["delta_bic"]),
-                    "params": {k: float(v) for k, v in a["params"].items()}}
+            out = {"name": a["name"], "delta_bic": float(a["delta_bic"]),
+                   "params": {k: float(v) for k, v in a["params"].items()}}
+            if a.get("form"):
+                out["form"] = a["form"]  # the reduced form that was swapped in
+            return out
 
         return {
             "name": self.name,
@@ -548,7 +551,10 @@ def _alternatives(cur: _Fitted, chosen, step_trials, candidates, ctx, margin):
                 continue
             d, new, alt = best
             i = new.model.effects.index(alt)
-            alts.append({"name": name, "delta_bic": float(d), "params": new.model.params_of(new.x, i)})
+            entry = {"name": name, "delta_bic": float(d), "params": new.model.params_of(new.x, i)}
+            if alt is not pool[name]:
+                entry["form"] = alt.form
+            alts.append(entry)
         out.append(sorted(alts, key=lambda a: a["delta_bic"]))
     return out
 
@@ -1243,6 +1249,13 @@ def _ratio(stats_):
     return stats_["std"] / floor if floor > 0 else float("inf")
 
 
+def _alternative_text(a: dict) -> str:
+    """``"slow_drift (linear; swap-in delta BIC -4.2: reads the log better)"``."""
+    form = f"{a['form']}; " if a.get("form") else ""
+    better = ": reads the log better" if a["delta_bic"] < 0 else ""
+    return f"{a['name']} ({form}swap-in delta BIC {_num(a['delta_bic'])}{better})"
+
+
 def _message(effects, explained, before, after=None):
     """One-sentence verdict: the effects, whether the floor is reached, and every caveat
     (confounded parameters, alternatives the log cannot tell apart); "unexplained" when a
@@ -1274,7 +1287,7 @@ def _message(effects, explained, before, after=None):
         alts = e.indistinguishable
         if alts:
             caveat += (f"; {e.name} not distinguishable from "
-                       + " or ".join(f"{a['name']} (swap-in delta BIC {_num(a['delta_bic'])})" for a in alts)
+                       + " or ".join(_alternative_text(a) for a in alts)
                        + f" on this log (margin {e.distinguish_bic:g})")
     if explained:
         return f"{names} explains the residual down to the exact-model quantization floor{caveat}"
