@@ -147,13 +147,11 @@ def one_draw(case, n_cycles, seed, sampler):
                                         harmonics=tuple(comp["chosen_harmonics"]),
                                         effects=tuple(comp["chosen_effects"]), start=point["x"],
                                         **sampler)
-        labels = comp["indistinguishable"]
-        alternatives = []
-        for label, seed_alt in zip(labels, alternatives_seed.spawn(len(labels))):
-            entry = next(m for m in comp["models"] if m["label"] == label)
-            alternatives.append(fit.fit_sinusoid(
-                t, counts, STEP, seed_alt, harmonics=tuple(entry["harmonics"]),
-                effects=tuple(entry["effects"]), start=comp["full_fits"][label]["x"], **sampler))
+        terms = compare.alternative_terms(comp)
+        alternatives = [fit.fit_sinusoid(t, counts, STEP, seed_alt, harmonics=harmonics,
+                                         effects=effects, start=point["x"], **sampler)
+                        for (_, harmonics, effects, point), seed_alt
+                        in zip(terms, alternatives_seed.spawn(len(terms)))]
         if alternatives:
             after = fit.pool_fits([pick] + alternatives)
     row["wall_s"] = time.perf_counter() - started

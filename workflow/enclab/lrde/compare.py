@@ -36,9 +36,11 @@ from scipy.special import logsumexp
 
 from enclab.lrde import effects as lrde_effects
 from enclab.lrde import fit as lrde_fit
+from enclab.lrde.effects import model_label
 
 __all__ = ["pointwise_log_likelihood", "heldout_elpd", "compare_motion_models",
-           "compare_effect_models", "predictive_check", "model_label", "DEFAULT_CANDIDATES"]
+           "compare_effect_models", "predictive_check", "model_label", "alternative_terms",
+           "DEFAULT_CANDIDATES"]
 
 
 def pointwise_log_likelihood(result, t, counts) -> np.ndarray:
@@ -197,10 +199,12 @@ DEFAULT_CANDIDATES = (((), ()), ((2,), ()), ((3,), ()), ((), ("hysteresis",)),
                       ((), ("drift",)), ((), ("count_jump",)), ((), ("time_jitter",)))
 
 
-def model_label(harmonics, effects) -> str:
-    """``"sinusoid"`` or the terms joined by ``+`` (``"harmonic3"``, ``"hysteresis"``)."""
-    terms = [f"harmonic{k}" for k in harmonics] + list(effects)
-    return "+".join(terms) if terms else "sinusoid"
+def alternative_terms(comparison: dict) -> list:
+    """``(label, harmonics, effects, point fit)`` of each model ``comparison``
+    (:func:`compare_effect_models`) cannot tell from its pick."""
+    by_label = {m["label"]: m for m in comparison["models"]}
+    return [(label, tuple(by_label[label]["harmonics"]), tuple(by_label[label]["effects"]),
+             comparison["full_fits"][label]) for label in comparison["indistinguishable"]]
 
 
 def _pointwise(m, t, counts, offset=0):

@@ -48,9 +48,15 @@ from enclab.lrde import model
 
 __all__ = ["EFFECTS", "check_effects", "effect_param_names", "effect_bounds", "effect_scales",
            "pointwise_log_likelihood", "log_likelihood", "jump_posterior", "simulate_counts",
-           "effect_signature"]
+           "effect_signature", "model_label"]
 
 EFFECTS = ("hysteresis", "drift", "count_jump", "time_jitter")
+
+
+def model_label(harmonics, effects) -> str:
+    """``"sinusoid"`` or the terms joined by ``+`` (``"harmonic3"``, ``"hysteresis"``)."""
+    terms = [f"harmonic{k}" for k in harmonics] + list(effects)
+    return "+".join(terms) if terms else "sinusoid"
 
 _SIGNATURES = {
     "hysteresis": "switch-up and switch-down levels differ by a width w (dead band of the "

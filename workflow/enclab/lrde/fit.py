@@ -351,6 +351,11 @@ class FitResult:
         """Encoder and clock effects of the reading model (:mod:`enclab.lrde.effects`)."""
         return tuple(self.settings.get("effects", ()))
 
+    @property
+    def label(self) -> str:
+        """The model's label (:func:`enclab.lrde.effects.model_label`)."""
+        return lrde_effects.model_label(self.harmonics, self.effects)
+
     def to_internal(self, si) -> np.ndarray:
         """SI sample rows in the internal units of :func:`log_likelihood`."""
         return _to_internal(np.asarray(si, dtype=float), self.step,
@@ -859,8 +864,7 @@ def pool_fits(fits) -> FitResult:
         b = np.concatenate([f.b_samples[i] for f, i in zip(fits, picks)])
         bias_b, offset_a = _quantiles(b), _quantiles(a_eq - b)
         summary["offset_a"], summary["bias_b"] = offset_a, bias_b
-    labels = ["+".join([f"harmonic{k}" for k in f.harmonics] + list(f.effects)) or "sinusoid"
-              for f in fits]
+    labels = [f.label for f in fits]
     return FitResult(
         param_names=names, samples=samples, chains=None, a_eq_samples=a_eq, summary=summary,
         offset_a=offset_a, bias_b=bias_b, reason=first.reason if b is not None else _UNIDENTIFIED,

@@ -117,11 +117,8 @@ def _alternative_kwargs(t, counts, step, comparison, added, common, settings):
     """Sampler arguments of each model the comparison could not tell from its pick (with the
     truth channel's added effects, like the pick)."""
     out = []
-    for label in (comparison or {}).get("indistinguishable", []):
-        entry = next(m for m in comparison["models"] if m["label"] == label)
-        harmonics, own = tuple(entry["harmonics"]), tuple(entry["effects"])
+    for _, harmonics, own, point in compare.alternative_terms(comparison) if comparison else ():
         effects = own + tuple(e for e in added if e not in own)
-        point = comparison["full_fits"][label]
         if effects != own:
             point = fit.map_fit(t, counts, step, f_hz=settings.get("f_hz"), harmonics=harmonics,
                                 effects=effects, start=point["x"],
@@ -284,9 +281,7 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
     if comparison is not None or added:
         jump = None
         if chosen_fit is not None:
-            _log.info("emcee fit of %s: %.1f s wall", "+".join(
-                [f"harmonic{k}" for k in harmonics] + list(chosen + tuple(added))),
-                chosen_fit.wall_time_s)
+            _log.info("emcee fit of %s: %.1f s wall", chosen_fit.label, chosen_fit.wall_time_s)
             if "count_jump" in point["effects"]:
                 index, delta, mass, _ = lrde_effects.jump_posterior(
                     point["x"], t, counts, step, point["centre"], point["t_ref"],
@@ -296,8 +291,9 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
                         "frame": "a_eq refers to the longer segment; the shorter one reads "
                                  f"{delta:+d} count"}
         if comparison is not None:
-            model_block = report.effect_model_block(comparison, chosen_fit,
-                                                    duration_s=float(t[-1] - t[0]), jump=jump)
+            model_block = report.effect_model_block(
+                comparison, chosen_fit, duration_s=float(t[-1] - t[0]), jump=jump,
+                averaged_over=None if averaged is None else averaged.settings["pooled"])
         else:
             model_block = dict(model_block, params=report.effect_params(
                 chosen_fit, float(t[-1] - t[0]), jump))
@@ -310,9 +306,6 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
     if reference is not None:
         model_block["reference"] = report.reference_block(reference, model_block, added)
     reported = averaged if averaged is not None else result
-    if averaged is not None:
-        model_block["averaged_over"] = list(averaged.settings["pooled"])
-        model_block["note"] = report.averaged_note(model_block)
     block = report.summary_block(reported, summary)
     block["channels"] = info
     block["model"] = model_block

@@ -163,14 +163,14 @@ def estimates_block(fit) -> dict:
         out["model"] = "averaged: " + ", ".join(pooled)
         out["models"] = list(pooled)
     else:
-        out["model"] = "+".join([f"harmonic{k}" for k in fit.harmonics] + list(fit.effects)) \
-            or "sinusoid"
+        out["model"] = fit.label
     out["converged"] = bool(fit.converged)
     return out
 
 
 def effect_model_block(comparison: dict | None, chosen_fit=None, reason: str | None = None,
-                       duration_s: float | None = None, jump: dict | None = None) -> dict:
+                       duration_s: float | None = None, jump: dict | None = None,
+                       averaged_over: list | None = None) -> dict:
     """The ``model`` entry of the ``lrde`` block from
     :func:`enclab.lrde.compare.compare_effect_models` (or why it was not run).
 
@@ -180,7 +180,9 @@ def effect_model_block(comparison: dict | None, chosen_fit=None, reason: str | N
     time_jitter s, ``c<k>``/``s<k>`` rad; plus ``drift_over_log`` (relative frequency change
     over ``duration_s``) and ``jump`` as given: ``{index, time_s, delta, probability}``),
     ``indistinguishable`` and ``note``, ``delta_bic``, ``models``
-    (held-out scores per candidate), ``check`` (the calibrated predictive check), ``rule``.
+    (held-out scores per candidate), ``check`` (the calibrated predictive check), ``rule``;
+    with ``averaged_over`` (the labels of the fits whose posteriors the reported estimates
+    pool, :func:`enclab.lrde.fit.pool_fits`) that list, and the note says so.
     """
     from enclab.lrde import effects as lrde_effects
 
@@ -198,23 +200,19 @@ def effect_model_block(comparison: dict | None, chosen_fit=None, reason: str | N
            "check": {k: (_num(v) if isinstance(v, float) else v)
                      for k, v in comparison["check"].items()},
            "rule": comparison["rule"], "n_cycles": comparison["n_cycles"]}
-    out["note"] = (None if not out["indistinguishable"] else
-                   f"{out['chosen']} is not distinguishable from "
-                   f"{', '.join(out['indistinguishable'])} on held-out cycles (within two "
-                   "standard errors); the estimates are those of the chosen model")
+    out["note"] = None
+    if out["indistinguishable"]:
+        which = "the estimates are those of the chosen model"
+        if averaged_over:
+            out["averaged_over"] = list(averaged_over)
+            which = (f"the reported estimates pool the posteriors of "
+                     f"{', '.join(averaged_over[:-1])} and {averaged_over[-1]} with equal "
+                     f"weights ('after' is {out['chosen']} alone)")
+        out["note"] = (f"{out['chosen']} is not distinguishable from "
+                       f"{', '.join(out['indistinguishable'])} on held-out cycles (within two "
+                       f"standard errors); {which}")
     out["params"] = effect_params(chosen_fit, duration_s, jump)
     return out
-
-
-def averaged_note(model_block: dict) -> str:
-    """The ``note`` of a ``model`` block whose estimates pool the chosen model's posterior with
-    those of the models it is not distinguishable from."""
-    models = model_block["averaged_over"]
-    return (f"{model_block['chosen']} is not distinguishable from "
-            f"{', '.join(model_block['indistinguishable'])} on held-out cycles (within two "
-            f"standard errors); the reported estimates pool the posteriors of "
-            f"{', '.join(models[:-1])} and {models[-1]} with equal weights ('after' is "
-            f"{model_block['chosen']} alone)")
 
 
 def effect_params(chosen_fit=None, duration_s: float | None = None,
