@@ -143,6 +143,27 @@ def test_full_log_score_is_the_held_out_score_summed_over_the_log():
     assert plain == pytest.approx(m["log_lik"], rel=1e-9)
 
 
+def test_held_out_dead_band_fold_is_scored_as_in_the_whole_log():
+    # Each fold joins every other cycle; the dead band's state at a seam is the reading just
+    # before it in the log, for the fold's fit and for its held-out score alike.
+    from enclab.lrde import effects
+
+    t, c = _effect_log(5, hysteresis=STEP / 5)
+    prev = np.concatenate((c[:1], c[:-1]))
+    m = fit.map_fit(t, c, STEP, effects=("hysteresis",))
+    whole = compare._pointwise(m, t, c)
+    fold = np.floor(t * 20.3).astype(int) % 2 == 1
+    total, lp = compare._predict(m, t[fold], c[fold], t[~fold], c[~fold], prev[fold],
+                                 prev[~fold])
+    np.testing.assert_allclose(lp, whole[fold], rtol=1e-12, atol=1e-300)
+    m_fold = fit.map_fit(t[~fold], c[~fold], STEP, effects=("hysteresis",),
+                         prev_counts=prev[~fold], init=m["init"])
+    direct = effects.log_likelihood(m_fold["x"], t[~fold], c[~fold], STEP, m_fold["centre"],
+                                    m_fold["t_ref"], effects=("hysteresis",),
+                                    prev_counts=prev[~fold])
+    assert m_fold["log_lik"] == pytest.approx(direct, rel=1e-12)
+
+
 @pytest.mark.slow
 def test_predictive_check_flags_a_log_no_candidate_explains():
     # A missed count mid-log, with no jump term among the candidates: every model reads a

@@ -65,6 +65,40 @@ def test_hysteresis_transition_probabilities_match_a_relay_simulation():
     assert checked >= 2
 
 
+def test_dead_band_on_every_other_cycle_reads_each_sample_after_its_true_predecessor():
+    # A dead band's state is the reading just before each sample in the log. Every other cycle
+    # joined into one array (a held-out fold) has a seam per cycle, where the array's previous
+    # element is a reading from a cycle earlier: with the true predecessors each sample scores
+    # as in the whole log, whatever the cycle origin; the array's own predecessors can read a
+    # transition that never happened.
+    w, noise = 0.3, 0.02
+    t = np.arange(int(40 * 2000.0 / F_HZ) + 37) / 2000.0
+    c = effects.simulate_counts(np.random.default_rng(4), t, STEP, A12, A_EQ, F_HZ, PHASE,
+                                noise_std=noise * STEP, hysteresis=w * STEP)
+    row = _row(noise, extra=[w])
+    whole = effects.pointwise_log_likelihood(row, t, c, STEP, 0.0, 0.0,
+                                             effects=("hysteresis",))[0]
+    prev = np.concatenate((c[:1], c[:-1]))
+    losses = []
+    for origin in np.linspace(0.0, 1.0, 40, endpoint=False):
+        fold = np.floor(t * F_HZ + origin).astype(int) % 2 == 0
+        joined = effects.pointwise_log_likelihood(row, t[fold], c[fold], STEP, 0.0, 0.0,
+                                                  effects=("hysteresis",),
+                                                  prev_counts=prev[fold])[0]
+        np.testing.assert_allclose(joined, whole[fold], rtol=1e-12, atol=1e-300)
+        total = effects.log_likelihood(row, t[fold], c[fold], STEP, 0.0, 0.0,
+                                       effects=("hysteresis",), prev_counts=prev[fold])
+        assert total == pytest.approx(whole[fold].sum(), rel=1e-12)
+        own = effects.pointwise_log_likelihood(row, t[fold], c[fold], STEP, 0.0, 0.0,
+                                               effects=("hysteresis",))[0]
+        losses.append(whole[fold].sum() - own.sum())
+    # Where noise moved a switch by a sample, a seam reads a switch back into the band.
+    assert max(losses) > 20.0
+    with pytest.raises(ValueError, match="prev_counts"):
+        effects.pointwise_log_likelihood(row, t, c, STEP, 0.0, 0.0, effects=("hysteresis",),
+                                         prev_counts=prev[1:])
+
+
 def test_drift_reading_probabilities_match_simulation():
     kappa = 0.5  # 1/s: the frequency grows by 50 % per second
     noise = 0.2

@@ -207,18 +207,21 @@ def alternative_terms(comparison: dict) -> list:
              comparison["full_fits"][label]) for label in comparison["indistinguishable"]]
 
 
-def _pointwise(m, t, counts, offset=0):
+def _pointwise(m, t, counts, offset=0, prev_counts=None):
     """Held-out pointwise log predictive density of a point fit, blurred in time by an eighth
     of a sample interval: a fit whose jitter collapsed on its own fold must not score the
     other fold's edges as impossible when they sit a fraction of a sample off (the same blur
     for every model, so the comparison stays fair; half a sample hid a 1/8-step dead band)."""
     return lrde_effects.pointwise_log_likelihood(
         m["x"][None, :], t, counts, m["step"], m["centre"], m["t_ref"], m["harmonics"],
-        m["effects"], offset=offset, time_blur=0.125 * m["dt"])[0]
+        m["effects"], offset=offset, time_blur=0.125 * m["dt"], prev_counts=prev_counts)[0]
 
 
-def _predict(m, t, counts, t_train, counts_train):
+def _predict(m, t, counts, t_train, counts_train, prev=None, prev_train=None):
     """Plug-in log predictive density of held-out samples: total and per sample.
+
+    ``prev`` and ``prev_train`` are the readings just before each held-out and each training
+    sample in the whole log (the dead band's state; None: the previous array element).
 
     Without a jump term, the product of the pointwise probabilities. With one, the training
     fit's most probable jump (:func:`enclab.lrde.effects.jump_posterior`) sets the count offset
@@ -227,15 +230,15 @@ def _predict(m, t, counts, t_train, counts_train):
     per-sample values follow its most probable component, shifted to add up to its total).
     """
     if "count_jump" not in m["effects"]:
-        lp = _pointwise(m, t, counts)
+        lp = _pointwise(m, t, counts, prev_counts=prev)
         return float(lp.sum()), lp
     index, delta, _, offsets = lrde_effects.jump_posterior(
         m["x"], t_train, counts_train, m["step"], m["centre"], m["t_ref"], m["harmonics"],
-        m["effects"])
+        m["effects"], prev_counts=prev_train)
     before_offset, after_offset = int(offsets[index - 1]), int(offsets[index])
     t_lo, t_hi = t_train[index - 1], t_train[index]
-    lp_before = _pointwise(m, t, counts, before_offset)
-    lp_after = _pointwise(m, t, counts, after_offset)
+    lp_before = _pointwise(m, t, counts, before_offset, prev)
+    lp_after = _pointwise(m, t, counts, after_offset, prev)
     gap = np.flatnonzero((t > t_lo) & (t < t_hi))
     n_before = int(np.searchsorted(t, t_lo, side="right"))
     splits = n_before + np.arange(gap.size + 1)
@@ -301,12 +304,13 @@ def predictive_check(m, t, counts, rng, n_sim=20) -> dict:
             "z": float((observed - scores.mean()) / sd) if sd > 0 else 0.0}
 
 
-def _fold_fits(t, counts, step, folds, harmonics, effects, base_fits, init, fit_kwargs):
+def _fold_fits(t, counts, prev, step, folds, harmonics, effects, base_fits, init, fit_kwargs):
     fits = []
     for fold, (train, _) in enumerate(folds):
         start = None if base_fits is None else base_fits[fold]["x"]
         fits.append(lrde_fit.map_fit(t[train], counts[train], step, harmonics=harmonics,
-                                     effects=effects, start=start, init=init, **fit_kwargs))
+                                     effects=effects, start=start, init=init,
+                                     prev_counts=prev[train], **fit_kwargs))
     return fits
 
 
@@ -377,12 +381,17 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
     if min(np.unique(cycle[odd]).size, np.unique(cycle[~odd]).size) < 2:
         raise ValueError("cannot compare models: fewer than four cycles in the log")
     folds = [(~odd, odd), (odd, ~odd)]
+    # A fold joins every other cycle: the dead band's state at a seam is the reading just
+    # before it in the log, not the last reading of the fold's previous cycle.
+    prev = np.concatenate((counts[:1], counts[:-1]))
 
     def evaluate(harmonics, effects, base):
-        fits = _fold_fits(t, counts, step, folds, harmonics, effects, base, init, fit_kwargs)
+        fits = _fold_fits(t, counts, prev, step, folds, harmonics, effects, base, init,
+                          fit_kwargs)
         units, totals = [], []
         for (train, test), m in zip(folds, fits):
-            total, lp = _predict(m, t[test], counts[test], t[train], counts[train])
+            total, lp = _predict(m, t[test], counts[test], t[train], counts[train],
+                                 prev[test], prev[train])
             _, unit = np.unique(cycle[test], return_inverse=True)
             units.append(np.bincount(unit, weights=lp))
             totals.append(total)

@@ -220,8 +220,21 @@ def _log_interval_sparse(lower, upper):
     return keep, vals
 
 
+def _previous(counts, prev_counts):
+    """The reading before each sample: ``prev_counts`` as given, else the array's own
+    previous element (the first sample its own)."""
+    if prev_counts is not None:
+        prev = np.asarray(prev_counts, dtype=float)
+        if prev.shape != np.shape(counts):
+            raise ValueError(f"prev_counts must have the shape of counts {np.shape(counts)}, "
+                             f"got {prev.shape}")
+        return prev
+    k = np.asarray(counts, dtype=float)
+    return np.concatenate((k[:1], k[:-1]))
+
+
 def _interval_bounds(p, t, counts, centre_count, t_ref, harmonics, effects, offset, time_blur,
-                     grid):
+                     grid, prev_counts=None):
     """Standardised interval bounds ``(lower, upper)`` of every reading, rows of ``p``."""
     cols = _columns(harmonics, effects)
     t = np.asarray(t, dtype=float)
@@ -247,7 +260,7 @@ def _interval_bounds(p, t, counts, centre_count, t_ref, harmonics, effects, offs
         # Previous reading c: k > c reads [k + w/2, k + 1 + w/2), k < c [k - w/2, k + 1 - w/2),
         # k = c [k - w/2, k + 1 + w/2).
         half_w = 0.5 * p[:, cols["hysteresis"]:cols["hysteresis"] + 1]
-        prev = np.concatenate((k[:1], k[:-1]))
+        prev = _previous(counts, prev_counts) - offset
         lo_sign = np.where(k > prev, 1.0, -1.0)
         hi_sign = np.where(k < prev, -1.0, 1.0)
         lower = half_w * lo_sign
@@ -264,7 +277,8 @@ def _interval_bounds(p, t, counts, centre_count, t_ref, harmonics, effects, offs
 
 
 def pointwise_log_likelihood(params, t, counts, step, centre_count, t_ref, harmonics=(),
-                             effects=(), offset=0, time_blur=0.0, grid=None) -> np.ndarray:
+                             effects=(), offset=0, time_blur=0.0, grid=None,
+                             prev_counts=None) -> np.ndarray:
     """``log p(count_j | previous count, theta)`` per parameter row and sample.
 
     Parameters
@@ -285,6 +299,12 @@ def pointwise_log_likelihood(params, t, counts, step, centre_count, t_ref, harmo
         readings from a point fit, see :func:`enclab.lrde.compare.compare_effect_models`).
     grid : tuple, optional
         :func:`enclab.lrde.model.uniform_grid` of ``t`` (faster phase factor), or None.
+    prev_counts : numpy.ndarray, optional
+        The reading just before each sample in the whole log (the dead band's state). By
+        default the previous element of ``counts``, which is right only when ``counts`` is
+        the whole log or one contiguous piece of it: a subset joined from separate pieces
+        (every other cycle) needs the true predecessors, or each seam reads a transition
+        that never happened.
 
     Returns
     -------
@@ -295,17 +315,18 @@ def pointwise_log_likelihood(params, t, counts, step, centre_count, t_ref, harmo
     p = np.atleast_2d(np.asarray(params, dtype=float))
     effects = check_effects(effects)
     lower, upper = _interval_bounds(p, t, counts, centre_count, t_ref, harmonics, effects,
-                                    offset, time_blur, grid)
+                                    offset, time_blur, grid, prev_counts)
     out = np.zeros(lower.shape)
     keep, vals = _log_interval_sparse(lower, upper)
     out.ravel()[keep] = vals
     return out
 
 
-def _jump_terms(params, t, counts, step, centre_count, t_ref, harmonics, effects, grid=None):
+def _jump_terms(params, t, counts, step, centre_count, t_ref, harmonics, effects, grid=None,
+                prev_counts=None):
     """Log-likelihood of every jump index and sign: array (n_rows, 2, n - 1) and the signs."""
     base = pointwise_log_likelihood(params, t, counts, step, centre_count, t_ref, harmonics,
-                                    effects, grid=grid)
+                                    effects, grid=grid, prev_counts=prev_counts)
     n = base.shape[1]
     c0 = np.cumsum(base, axis=1)
     total0 = c0[:, -1:]
@@ -315,7 +336,8 @@ def _jump_terms(params, t, counts, step, centre_count, t_ref, harmonics, effects
     signs = (1, -1)
     for delta in signs:
         shifted = pointwise_log_likelihood(params, t, counts, step, centre_count, t_ref,
-                                           harmonics, effects, offset=delta, grid=grid)
+                                           harmonics, effects, offset=delta, grid=grid,
+                                           prev_counts=prev_counts)
         cd = np.cumsum(shifted, axis=1)
         # Shorter segment offset by delta from the reference (longer) segment.
         before_short = cd[:, idx - 1] + (total0 - c0[:, idx - 1])
@@ -325,28 +347,30 @@ def _jump_terms(params, t, counts, step, centre_count, t_ref, harmonics, effects
 
 
 def log_likelihood(params, t, counts, step, centre_count, t_ref, harmonics=(), effects=(),
-                   grid=None):
+                   grid=None, prev_counts=None):
     """Total log-likelihood per parameter row; ``count_jump`` marginalised over index and sign.
 
     The jump's prior is uniform over the ``n - 1`` gaps between samples and the two signs.
-    ``grid`` is :func:`enclab.lrde.model.uniform_grid` of ``t`` or None (same values, slower).
+    ``grid`` is :func:`enclab.lrde.model.uniform_grid` of ``t`` or None (same values, slower);
+    ``prev_counts`` as :func:`pointwise_log_likelihood`.
     """
     effects = check_effects(effects)
     p = np.atleast_2d(np.asarray(params, dtype=float))
     if "count_jump" not in effects:
         lower, upper = _interval_bounds(p, t, counts, centre_count, t_ref, harmonics, effects,
-                                        0, 0.0, grid)
+                                        0, 0.0, grid, prev_counts)
         keep, vals = _log_interval_sparse(lower, upper)
         out = np.bincount(keep // lower.shape[1], weights=vals, minlength=p.shape[0])
     else:
         terms, _ = _jump_terms(p, t, counts, step, centre_count, t_ref, harmonics, effects,
-                               grid)
+                               grid, prev_counts)
         flat = terms.reshape(p.shape[0], -1)
         out = logsumexp(flat, axis=1) - np.log(flat.shape[1])
     return out if np.ndim(params) == 2 else float(out[0])
 
 
-def jump_posterior(params, t, counts, step, centre_count, t_ref, harmonics=(), effects=()):
+def jump_posterior(params, t, counts, step, centre_count, t_ref, harmonics=(), effects=(),
+                   prev_counts=None):
     """Posterior of the jump at one parameter row: ``(index, delta, probability, offsets)``.
 
     ``index`` is the first sample after the jump, ``delta`` the offset of the shorter segment,
@@ -355,7 +379,7 @@ def jump_posterior(params, t, counts, step, centre_count, t_ref, harmonics=(), e
     """
     p = np.atleast_2d(np.asarray(params, dtype=float))[:1]
     terms, signs = _jump_terms(p, t, counts, step, centre_count, t_ref, harmonics,
-                               tuple(e for e in effects))
+                               tuple(e for e in effects), prev_counts=prev_counts)
     flat = terms[0]
     post = np.exp(flat - logsumexp(flat))
     sign_i, gap = np.unravel_index(int(np.argmax(post)), post.shape)

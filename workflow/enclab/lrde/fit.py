@@ -153,7 +153,7 @@ def _motion_steps(p, t, t_ref, grid, harmonics):
 
 
 def log_likelihood(params, t, counts, step, centre_count, t_ref, grid=None, harmonics=(),
-                   effects=()):
+                   effects=(), prev_counts=None):
     """Log-likelihood of the counts for parameter rows in internal units.
 
     Parameters
@@ -179,6 +179,10 @@ def log_likelihood(params, t, counts, step, centre_count, t_ref, grid=None, harm
     effects : tuple of str
         Encoder and clock effects (:mod:`enclab.lrde.effects`); their parameters follow the
         harmonics' columns. With effects the general (slower) likelihood of that module is used.
+    prev_counts : numpy.ndarray, optional
+        The reading before each sample, for the dead band's state
+        (:func:`enclab.lrde.effects.pointwise_log_likelihood`); needed when ``counts`` joins
+        separate pieces of a log.
 
     Returns
     -------
@@ -186,7 +190,8 @@ def log_likelihood(params, t, counts, step, centre_count, t_ref, grid=None, harm
     """
     if effects:
         return lrde_effects.log_likelihood(params, t, counts, step, centre_count, t_ref,
-                                           harmonics, effects, grid=grid)
+                                           harmonics, effects, grid=grid,
+                                           prev_counts=prev_counts)
     p = np.atleast_2d(params)
     eb, log_s = p[:, 1:2], p[:, 4:5]
     inv_s = 10.0 ** -log_s
@@ -213,7 +218,7 @@ def _log_interval_prob_scaled(lower, inv_s):
 
 
 def log_probability(params, t, counts, step, centre_count, t_ref, bounds, grid=None,
-                    sigma_prior="log-uniform", harmonics=(), effects=()):
+                    sigma_prior="log-uniform", harmonics=(), effects=(), prev_counts=None):
     """Log-posterior (uniform priors on ``bounds``, rows outside get ``-inf``); vectorised.
 
     ``sigma_prior`` is the prior of the jitter inside its bounds: ``"log-uniform"`` (flat in
@@ -231,7 +236,8 @@ def log_probability(params, t, counts, step, centre_count, t_ref, bounds, grid=N
         per_slice = max(1, _CACHE_ENTRIES // max(np.size(t), 1))
         out[inside] = np.concatenate([
             log_likelihood(rows[i:i + per_slice], t, counts, step, centre_count, t_ref, grid,
-                           harmonics, effects) for i in range(0, rows.shape[0], per_slice)])
+                           harmonics, effects, prev_counts)
+            for i in range(0, rows.shape[0], per_slice)])
         if sigma_prior == "uniform":
             out[inside] += np.log(10.0) * p[inside, 4]
         elif sigma_prior != "log-uniform":
@@ -881,7 +887,8 @@ def pool_fits(fits) -> FitResult:
 
 
 def map_fit(t, counts, step, f_hz=None, harmonics=(), effects=(), start=None,
-            sigma_range=None, sigma_prior="uniform", max_evals=800, init=None) -> dict:
+            sigma_range=None, sigma_prior="uniform", max_evals=800, init=None,
+            prev_counts=None) -> dict:
     """Maximum of the log-posterior of a model (Nelder-Mead, restarted once from its optimum).
 
     A cheap stand-in for :func:`fit_sinusoid` where only a point estimate is needed (the
@@ -901,6 +908,9 @@ def map_fit(t, counts, step, f_hz=None, harmonics=(), effects=(), start=None,
         Another point fit's ``init`` (:func:`initial_guess` of the whole log): its centre
         count, time origin and prior bounds are reused, so that fits to subsets of the log
         (e.g. every other cycle) share one frame.
+    prev_counts : numpy.ndarray, optional
+        The reading before each sample in the whole log, when ``counts`` joins separate
+        pieces of it (:func:`log_likelihood`).
 
     Returns
     -------
@@ -914,7 +924,7 @@ def map_fit(t, counts, step, f_hz=None, harmonics=(), effects=(), start=None,
     counts = _check_int_counts(counts, t.size)
     step = model._check_step(step)
     setup = _setup(t, counts, step, f_hz, sigma_range, sigma_prior, harmonics, effects, init)
-    bounds, kwargs = setup["bounds"], setup["kwargs"]
+    bounds, kwargs = setup["bounds"], setup["kwargs"] | {"prev_counts": prev_counts}
     margin = 1e-6 * np.ptp(bounds, axis=1)
     starts = [setup["x0"].copy()]
     if start is not None:
@@ -982,7 +992,7 @@ def map_fit(t, counts, step, f_hz=None, harmonics=(), effects=(), start=None,
             best = res
     res, x = best, best.x
     log_lik = float(log_likelihood(x[None, :], t, counts, step, setup["centre"], setup["t_ref"],
-                                   None, setup["harmonics"], setup["effects"])[0])
+                                   None, setup["harmonics"], setup["effects"], prev_counts)[0])
     return {"x": x, "log_post": -float(res.fun), "log_lik": log_lik, "names": setup["names"],
             "centre": setup["centre"], "t_ref": setup["t_ref"], "step": step,
             "harmonics": setup["harmonics"], "effects": setup["effects"],
