@@ -318,3 +318,26 @@ def test_models_the_comparison_cannot_tell_apart_are_pooled_in_the_reported_esti
     rows = {r["quantity"]: r for r in report.batch_rows("sim_harmonic", block)}
     assert rows["A12"]["median"] == block["averaged"]["A12"]["median"]
     assert rows["A12"]["model"] == "averaged: hysteresis, harmonic3"
+
+
+@pytest.mark.slow
+def test_an_effect_the_kept_sinusoid_does_not_rule_out_is_pooled_with_it():
+    """A 3rd harmonic of a few hundredths of a step: below the rule's bar, so the sinusoid is
+    kept, but the harmonic predicts each held-out fold better. It is listed as not ruled out
+    and the reported estimates pool both posteriors; ``after`` is the sinusoid's own."""
+    df, meta = _harmonic_log(0)
+    settings = dict(FAST, motion_models=[[], [3]], effects=["hysteresis"], effect_pairs=False)
+    block, _, md, _ = pipeline.analyse_lrde_log(df, meta, seed=2, settings=settings)
+    m = block["model"]
+    assert m["chosen"] == "sinusoid" and m["indistinguishable"] == []
+    # Not ruled out: exactly the models that predict each fold better by 1 nat or more in all.
+    expected = [r["label"] for r in m["models"] if r["label"] != "sinusoid"
+                and min(r["delta_elpd_halves"]) > 0 and r["delta_elpd"] >= 1.0]
+    assert m["not_ruled_out"] == expected == ["harmonic3"]
+    assert m["averaged_over"] == ["sinusoid", "harmonic3"]
+    assert block["after"]["model"] == "sinusoid" == block["before"]["model"]
+    assert block["A12"] == block["averaged"]["A12"] != block["after"]["A12"]
+    assert "harmonic3 predicts each held-out fold better than the sinusoid" in m["note"]
+    assert "keeps the sinusoid but does not rule the others out" in md
+    assert "the paper's model stands" not in md
+    json.dumps(block)

@@ -17,9 +17,10 @@ noise          position noise U(0.005, 0.1) step                 sinusoid
 =============  ================================================  ======================
 
 Per draw the stage's own steps run: the effect comparison
-(:func:`enclab.lrde.compare.compare_effect_models`), the sinusoid's emcee fit (``before``) and,
-when the comparison chooses a model, that model's emcee fit and one of each model it cannot
-tell from it, pooled with equal weights as the stage reports them (``after``), with the sampler
+(:func:`enclab.lrde.compare.compare_effect_models`), the sinusoid's emcee fit (``before``),
+when the comparison chooses a model that model's emcee fit, and one of each model it cannot
+tell from its pick (or, when it keeps the sinusoid, does not rule out), pooled with the pick's
+with equal weights as the stage reports them (``after``), with the sampler
 settings of ``config.yaml`` (``--n-walkers`` etc.). Recorded: the chosen model, whether it names
 the right term, the predictive check, 90 % intervals of ``A12`` and ``E_b`` before and after
 (``E_b`` relative to count 0 in the frame of the longer segment for a jump) and of the pick's
@@ -28,7 +29,7 @@ own fit (``pick``, the same as ``after`` unless pooled), convergence and wall ti
 A draw's effect is *named* when the chosen model contains its term, and *identified* when it
 is named or the comparison lists its term among the models not distinguishable from the pick
 (the report then says "not distinguishable from ..."); a clean or noise log is identified only
-when the sinusoid stays.
+when the sinusoid stays. A model not ruled out beside a kept sinusoid names nothing.
 
 Summary per (cycles, case): ``n``; named and identified rates with Wilson 95 % intervals; the
 detection threshold (the size at which a logistic fit of identified vs log size crosses 50 %)
@@ -147,19 +148,22 @@ def one_draw(case, n_cycles, seed, sampler):
                                         harmonics=tuple(comp["chosen_harmonics"]),
                                         effects=tuple(comp["chosen_effects"]), start=point["x"],
                                         **sampler)
-        terms = compare.alternative_terms(comp)
-        alternatives = [fit.fit_sinusoid(t, counts, STEP, seed_alt, harmonics=harmonics,
-                                         effects=effects, start=point["x"], **sampler)
-                        for (_, harmonics, effects, point), seed_alt
-                        in zip(terms, alternatives_seed.spawn(len(terms)))]
-        if alternatives:
-            after = fit.pool_fits([pick] + alternatives)
+    # As the stage: the models not distinguishable from the pick (or not ruled out beside a
+    # kept sinusoid) are fitted and pooled with it.
+    terms = compare.alternative_terms(comp)
+    alternatives = [fit.fit_sinusoid(t, counts, STEP, seed_alt, harmonics=harmonics,
+                                     effects=effects, start=point["x"], **sampler)
+                    for (_, harmonics, effects, point), seed_alt
+                    in zip(terms, alternatives_seed.spawn(len(terms)))]
+    if alternatives:
+        after = fit.pool_fits([pick] + alternatives)
     row["wall_s"] = time.perf_counter() - started
     right = RIGHT[case]
     terms = comp["chosen"].split("+")
     alternatives = [term for label in comp["indistinguishable"] for term in label.split("+")]
     named = (comp["chosen"] == "sinusoid") if right is None else (right in terms)
     row |= {"chosen": comp["chosen"], "indistinguishable": "|".join(comp["indistinguishable"]),
+            "not_ruled_out": "|".join(comp["not_ruled_out"]),
             "named": named,
             # The requirement's "identified": named, or named by the report as not
             # distinguishable from the pick (a clean log has no such allowance).

@@ -201,10 +201,12 @@ DEFAULT_CANDIDATES = (((), ()), ((2,), ()), ((3,), ()), ((), ("hysteresis",)),
 
 def alternative_terms(comparison: dict) -> list:
     """``(label, harmonics, effects, point fit)`` of each model ``comparison``
-    (:func:`compare_effect_models`) cannot tell from its pick."""
+    (:func:`compare_effect_models`) cannot tell from its pick or, when it keeps the
+    sinusoid, does not rule out."""
     by_label = {m["label"]: m for m in comparison["models"]}
+    labels = comparison["indistinguishable"] + comparison.get("not_ruled_out", [])
     return [(label, tuple(by_label[label]["harmonics"]), tuple(by_label[label]["effects"]),
-             comparison["full_fits"][label]) for label in comparison["indistinguishable"]]
+             comparison["full_fits"][label]) for label in labels]
 
 
 def _pointwise(m, t, counts, offset=0, prev_counts=None):
@@ -316,7 +318,7 @@ def _fold_fits(t, counts, prev, step, folds, harmonics, effects, base_fits, init
 
 def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, min_z=2.0,
                           f_hz=None, n_sim=20, trust_z=-4.0, pairs=True, sigma_range=None,
-                          sigma_prior="uniform") -> dict:
+                          sigma_prior="uniform", min_gain=1.0) -> dict:
     """Held-out comparison of motion, encoder and clock effects by point fits (two folds).
 
     Each candidate ``(harmonics, effects)`` is fitted (:func:`enclab.lrde.fit.map_fit`) on the
@@ -349,6 +351,14 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
     is not an alternative to it); its ``delta_over_chosen`` and ``se_over_chosen`` hold that
     evidence.
 
+    When the sinusoid is kept, every candidate that still predicts each fold better than it,
+    by ``min_gain`` nats or more in all, is listed in ``not_ruled_out``: an effect too small
+    to clear the bar (or one whose held-out gain the BIC penalty refused) moves the
+    estimates all the same, by more than their width on a 20-cycle log (a third harmonic
+    shifts the turning points the stroke is read from). Smaller gains (below a factor ``e`` in
+    predictive density over the whole log at the default) are not listed: each listed model
+    costs the stage an emcee fit.
+
     The chosen model is then checked (:func:`predictive_check`): its log-likelihood at the
     full-log point fit against the distribution of the same score on ``n_sim`` readings
     simulated from that fit. ``z < trust_z`` means even the best candidate explains the
@@ -361,10 +371,10 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
         ``models`` (per candidate: ``label, harmonics, effects, elpd_per_cycle, delta_elpd,
         delta_se, z, delta_elpd_halves, delta_bic``, and for alternatives to a chosen effect
         ``delta_over_chosen, se_over_chosen``), ``chosen`` (label), ``chosen_harmonics``,
-        ``chosen_effects``, ``indistinguishable`` (labels), ``check`` ``{z, observed,
+        ``chosen_effects``, ``indistinguishable`` and ``not_ruled_out`` (labels), ``check`` ``{z, observed,
         sim_mean, sim_sd, trusted}``, ``n_cycles``, ``rule``, ``full_fits`` (label -> point
         fit of the whole log; the sinusoid, every model tried on the full log, the chosen one
-        and each indistinguishable one).
+        and each one listed in ``indistinguishable`` or ``not_ruled_out``).
     """
     t = np.asarray(t, dtype=float)
     counts = np.asarray(counts)
@@ -475,8 +485,15 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
                     best = entry
     best_res = results[best["label"]][1]
     best_terms = set(best["label"].split("+"))
-    indistinguishable = []
+    indistinguishable, not_ruled_out = [], []
     for m in models:
+        if (best["label"] == "sinusoid" and m["label"] != "sinusoid"
+                and min(m["delta_elpd_halves"]) > 0 and m["delta_elpd"] >= min_gain):
+            # The sinusoid kept, yet this model predicts each fold better: an effect below
+            # the rule's bar (or one the BIC penalty refused) that the readings do not rule
+            # out; its estimates may differ from the sinusoid's by more than their width.
+            not_ruled_out.append(m["label"])
+            continue
         # An alternative explanation: it predicts each fold better than the sinusoid too,
         # and its held-out score is within two standard errors of the pick's. Whether it
         # also cleared the bar against the sinusoid does not matter here: near the detection
@@ -498,19 +515,22 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
     chosen_h, chosen_e = tuple(best["harmonics"]), tuple(best["effects"])
     if best["label"] != "sinusoid":
         full_fit(best["label"], chosen_h, chosen_e)
-    for label in indistinguishable:
+    for label in indistinguishable + not_ruled_out:
         (h, e), _ = results[label]
         full_fit(label, h, e)
     return {"models": models, "chosen": best["label"], "chosen_harmonics": list(chosen_h),
             "chosen_effects": list(chosen_e), "delta_bic": best["delta_bic"],
-            "indistinguishable": indistinguishable, "n_cycles": int(n_cycles),
+            "indistinguishable": indistinguishable, "not_ruled_out": not_ruled_out,
+            "n_cycles": int(n_cycles),
             "check": check,
             "rule": (f"a model replaces the sinusoid when its held-out gain exceeds {min_z:g} "
                      "standard errors, it predicts each fold better, and its full-log delta BIC "
                      "(likelihood with the held-out score's time blur) is positive (point "
                      "fits, even/odd cycles as folds, cycles as units); other models that "
                      "predict each fold better than the sinusoid and score within two standard "
-                     "errors of the chosen one are not distinguishable from it; "
+                     "errors of the chosen one are not distinguishable from it; when the "
+                     f"sinusoid is kept, models that predict each fold better by {min_gain:g} "
+                     "nat or more in all are not ruled out; "
                      f"estimates are untrusted when the chosen model's log-likelihood lies "
                      f"more than {-trust_z:g} standard deviations below that of its own "
                      "simulated readings"),

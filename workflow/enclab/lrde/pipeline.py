@@ -261,20 +261,22 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
                             sigma_prior=settings.get("sigma_prior", "uniform"))
     elif harmonics or chosen:
         point = comparison["full_fits"][comparison["chosen"]]
+    alternatives = _alternative_kwargs(t, counts, step, comparison, added, common, settings)
     jobs = [(fit_seed, before_kw)]
+    jobs += list(zip(alternatives_seed.spawn(len(alternatives)), alternatives))
     if point is not None:
         after_kw = {"harmonics": harmonics, "effects": chosen + tuple(added),
                     "start": point["x"], **common}
-        alternatives = _alternative_kwargs(t, counts, step, comparison, added, common,
-                                           settings)
-        jobs += list(zip(alternatives_seed.spawn(len(alternatives)), alternatives))
         jobs.append((after_seed, after_kw))
     fits = _run_fits(t, counts, step, jobs, threads)
     result = fits[0]
     chosen_fit = fits[-1] if after_kw is not None else None
-    # Models the held-out comparison cannot tell from the pick: their posteriors are pooled
-    # with its own (equal weights), so the reported intervals do not hang on the pick.
-    averaged = fit.pool_fits([chosen_fit] + fits[1:-1]) if len(fits) > 2 else None
+    # Models the held-out comparison cannot tell from the pick (or, when it keeps the
+    # sinusoid, does not rule out): their posteriors are pooled with the pick's (equal
+    # weights), so the reported intervals do not hang on the pick.
+    alternative_fits = fits[1:1 + len(alternatives)]
+    pick = result if chosen_fit is None else chosen_fit
+    averaged = fit.pool_fits([pick] + alternative_fits) if alternative_fits else None
     # The wall time goes to the log, not the block: summary.json must be byte-reproducible.
     _log.info("emcee fit: %.1f s wall, acceptance %.2f", result.wall_time_s, result.acceptance)
     before = result

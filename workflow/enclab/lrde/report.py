@@ -179,7 +179,7 @@ def effect_model_block(comparison: dict | None, chosen_fit=None, reason: str | N
     harmonic parameters, ``{median, q05, q95}`` in SI units: hysteresis rad, drift 1/s,
     time_jitter s, ``c<k>``/``s<k>`` rad; plus ``drift_over_log`` (relative frequency change
     over ``duration_s``) and ``jump`` as given: ``{index, time_s, delta, probability}``),
-    ``indistinguishable`` and ``note``, ``delta_bic``, ``models``
+    ``indistinguishable``, ``not_ruled_out`` and ``note``, ``delta_bic``, ``models``
     (held-out scores per candidate), ``check`` (the calibrated predictive check), ``rule``;
     with ``averaged_over`` (the labels of the fits whose posteriors the reported estimates
     pool, :func:`enclab.lrde.fit.pool_fits`) that list, and the note says so.
@@ -194,6 +194,7 @@ def effect_model_block(comparison: dict | None, chosen_fit=None, reason: str | N
            "signature": {e: lrde_effects.effect_signature(e)
                          for e in comparison["chosen_effects"]},
            "indistinguishable": list(comparison["indistinguishable"]),
+           "not_ruled_out": list(comparison.get("not_ruled_out", [])),
            "delta_bic": _num(comparison["delta_bic"]),
            "models": [{k: (_num(v) if isinstance(v, float) else v) for k, v in m.items()}
                       for m in comparison["models"]],
@@ -201,16 +202,23 @@ def effect_model_block(comparison: dict | None, chosen_fit=None, reason: str | N
                      for k, v in comparison["check"].items()},
            "rule": comparison["rule"], "n_cycles": comparison["n_cycles"]}
     out["note"] = None
-    if out["indistinguishable"]:
+    if out["indistinguishable"] or out["not_ruled_out"]:
         which = "the estimates are those of the chosen model"
         if averaged_over:
             out["averaged_over"] = list(averaged_over)
             which = (f"the reported estimates pool the posteriors of "
                      f"{', '.join(averaged_over[:-1])} and {averaged_over[-1]} with equal "
                      f"weights ('after' is {out['chosen']} alone)")
-        out["note"] = (f"{out['chosen']} is not distinguishable from "
-                       f"{', '.join(out['indistinguishable'])} on held-out cycles (within two "
-                       f"standard errors); {which}")
+        if out["indistinguishable"]:
+            out["note"] = (f"{out['chosen']} is not distinguishable from "
+                           f"{', '.join(out['indistinguishable'])} on held-out cycles (within "
+                           f"two standard errors); {which}")
+        else:
+            out["note"] = (f"no effect clears the rule, but {', '.join(out['not_ruled_out'])} "
+                           f"predict{'s' if len(out['not_ruled_out']) == 1 else ''} each "
+                           f"held-out fold better than the sinusoid: the readings do not rule "
+                           f"{'it' if len(out['not_ruled_out']) == 1 else 'them'} out; "
+                           f"{which}")
     out["params"] = effect_params(chosen_fit, duration_s, jump)
     return out
 
@@ -386,9 +394,11 @@ def report_markdown(block: dict, log_id: str | None = None) -> str:
     averaged = block.get("averaged")
     if averaged:
         models = averaged["models"]
+        why = ("the held-out comparison keeps the sinusoid but does not rule the others out"
+               if (block.get("model") or {}).get("chosen") == "sinusoid"
+               else "the held-out comparison cannot tell these models apart")
         lines[-1:-1] = ["", f"These estimates pool the posteriors of {', '.join(models[:-1])} "
-                        f"and {models[-1]} (equal weights): the held-out comparison cannot tell "
-                        "these models apart."]
+                        f"and {models[-1]} (equal weights): {why}."]
     dwell_a12 = block["dwell_formula_A12"]
     lines.append("Eq. (4) baseline (mean dwell half-widths): "
                  + (f"{dwell_a12 * deg:.4f} deg." if dwell_a12 is not None
@@ -422,9 +432,12 @@ def _effect_lines(block: dict) -> list[str]:
         bic = f"{r['delta_bic']:.1f}" if r.get("delta_bic") is not None else "-"
         lines.append(f"| {r['label']} | {r['elpd_per_cycle']:.3f} | {gain} | {z} | {bic} |")
     lines += ["", f"Rule: {m['rule']}.", ""]
-    if m["chosen"] == "sinusoid":
+    if m["chosen"] == "sinusoid" and not m.get("not_ruled_out"):
         lines.append("Result: no effect predicts the held-out readings better than the "
                      "sinusoid; the paper's model stands.")
+    elif m["chosen"] == "sinusoid":
+        lines.append("Result: no effect clears the rule; the paper's model is kept.")
+        lines.append(f"Note: {m['note']}.")
     else:
         sig = "; ".join(f"{k}: {v}" for k, v in (m.get("signature") or {}).items())
         lines.append(f"Result: **{m['chosen']}**" + (f" ({sig})" if sig else "") + ".")
