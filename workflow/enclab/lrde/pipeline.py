@@ -29,8 +29,9 @@ see :func:`enclab.lrde.compare.compare_effect_models`.
 The paper's sinusoid is fitted first (``before``); when the comparison chooses a model with
 an added term, that model is fitted the same way and its posterior gives the reported
 ``A12``, ``E_b``, ``a_eq``, ``offset_a``, ``bias_b`` (``after``). When the comparison names
-models it cannot tell from its pick (``model.indistinguishable``), each of them is fitted too
-and the reported estimates pool all their posteriors with equal weights (``averaged``,
+models it cannot tell from its pick (``model.indistinguishable``), or, beside a kept sinusoid,
+models it does not rule out (``model.not_ruled_out``), each of them is fitted too and the
+reported estimates pool all their posteriors with equal weights (``averaged``,
 :func:`enclab.lrde.fit.pool_fits`; ``after`` stays the pick's own). ``trust`` says per
 quantity whether it can be relied on and why not. With a truth channel, what the residual
 stage found on the coarse channel (``references``) joins the final model and is set against
