@@ -372,9 +372,9 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
         delta_se, z, delta_elpd_halves, delta_bic``, and for alternatives to a chosen effect
         ``delta_over_chosen, se_over_chosen``), ``chosen`` (label), ``chosen_harmonics``,
         ``chosen_effects``, ``indistinguishable`` and ``not_ruled_out`` (labels), ``check``
-        ``{z, observed, sim_mean, sim_sd, trusted}``, ``n_cycles``, ``rule``, ``full_fits`` (label -> point
-        fit of the whole log; the sinusoid, every model tried on the full log, the chosen one
-        and each one listed in ``indistinguishable`` or ``not_ruled_out``).
+        ``{z, observed, sim_mean, sim_sd, trusted}``, ``n_cycles``, ``rule``, ``full_fits``
+        (label -> point fit of the whole log; the sinusoid, every model tried on the full log,
+        the chosen one and each one listed in ``indistinguishable`` or ``not_ruled_out``).
     """
     t = np.asarray(t, dtype=float)
     counts = np.asarray(counts)
