@@ -153,8 +153,8 @@ def test_held_out_dead_band_fold_is_scored_as_in_the_whole_log():
     m = fit.map_fit(t, c, STEP, effects=("hysteresis",))
     whole = compare._pointwise(m, t, c)
     fold = np.floor(t * 20.3).astype(int) % 2 == 1
-    total, lp = compare._predict(m, t[fold], c[fold], t[~fold], c[~fold], prev[fold],
-                                 prev[~fold])
+    _, lp = compare._predict(m, t[fold], c[fold], t[~fold], c[~fold], prev[fold],
+                             prev[~fold])
     np.testing.assert_allclose(lp, whole[fold], rtol=1e-12, atol=1e-300)
     m_fold = fit.map_fit(t[~fold], c[~fold], STEP, effects=("hysteresis",),
                          prev_counts=prev[~fold], init=m["init"])
