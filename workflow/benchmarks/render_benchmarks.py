@@ -38,6 +38,9 @@ TABLES = [
     ("lrde_detectability.csv", "Low-resolution encoder: which logs hold the evidence",
      "Named rates at 3x the detection threshold, overall and among the logs whose readings favour "
      "the true model over the sinusoid's fit (oracle BIC gain > 0; `lrde_detectability.py`)."),
+    ("lrde_calibration.csv", "Low-resolution encoder: the posterior's own calibration",
+     "Coverage of the 90 % intervals when the true model is fitted (no comparison, no pooling), "
+     "and of E_b's posterior with every other parameter at the truth (`lrde_calibration.py`)."),
     ("lrde_truth_loop.csv", "Low-resolution encoder: the truth channel's findings in the fit",
      "Hysteresis logs with a fine channel: named by the comparison alone and with the residual "
      "stage's findings, coverage of A12, E_b, a and b before and after (`lrde_truth_loop.py`)."),
