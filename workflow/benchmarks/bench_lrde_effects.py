@@ -150,13 +150,13 @@ def one_draw(case, n_cycles, seed, sampler):
                                         **sampler)
     # As the stage: the models not distinguishable from the pick (or not ruled out beside a
     # kept sinusoid) are fitted and pooled with it.
-    terms = compare.alternative_terms(comp)
-    alternatives = [fit.fit_sinusoid(t, counts, STEP, seed_alt, harmonics=harmonics,
-                                     effects=effects, start=point["x"], **sampler)
-                    for (_, harmonics, effects, point), seed_alt
-                    in zip(terms, alternatives_seed.spawn(len(terms)))]
-    if alternatives:
-        after = fit.pool_fits([pick] + alternatives)
+    alt_terms = compare.alternative_terms(comp)
+    alt_fits = [fit.fit_sinusoid(t, counts, STEP, seed_alt, harmonics=harmonics,
+                                 effects=effects, start=point["x"], **sampler)
+                for (_, harmonics, effects, point), seed_alt
+                in zip(alt_terms, alternatives_seed.spawn(len(alt_terms)))]
+    if alt_fits:
+        after = fit.pool_fits([pick] + alt_fits)
     row["wall_s"] = time.perf_counter() - started
     right = RIGHT[case]
     terms = comp["chosen"].split("+")

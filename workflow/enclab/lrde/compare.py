@@ -393,7 +393,7 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
     folds = [(~odd, odd), (odd, ~odd)]
     # A fold joins every other cycle: the dead band's state at a seam is the reading just
     # before it in the log, not the last reading of the fold's previous cycle.
-    prev = np.concatenate((counts[:1], counts[:-1]))
+    prev = np.concatenate((counts[:1], counts[:-1])).astype(float)
 
     def evaluate(harmonics, effects, base):
         fits = _fold_fits(t, counts, prev, step, folds, harmonics, effects, base, init,
@@ -486,22 +486,20 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
     best_res = results[best["label"]][1]
     best_terms = set(best["label"].split("+"))
     indistinguishable, not_ruled_out = [], []
-    for m in models:
-        if (best["label"] == "sinusoid" and m["label"] != "sinusoid"
-                and min(m["delta_elpd_halves"]) > 0 and m["delta_elpd"] >= min_gain):
-            # The sinusoid kept, yet this model predicts each fold better: an effect below
-            # the rule's bar (or one the BIC penalty refused) that the readings do not rule
-            # out; its estimates may differ from the sinusoid's by more than their width.
-            not_ruled_out.append(m["label"])
-            continue
+    if best["label"] == "sinusoid":
+        # The sinusoid kept, yet these models predict each fold better: effects below the
+        # rule's bar (or refused by the BIC penalty) that the readings do not rule out;
+        # their estimates may differ from the sinusoid's by more than their width.
+        not_ruled_out = [m["label"] for m in models[1:] if min(m["delta_elpd_halves"]) > 0
+                         and m["delta_elpd"] >= min_gain]
+    for m in models if best["label"] != "sinusoid" else ():
         # An alternative explanation: it predicts each fold better than the sinusoid too,
         # and its held-out score is within two standard errors of the pick's. Whether it
         # also cleared the bar against the sinusoid does not matter here: near the detection
         # limit the pick clears it by luck as much as by its own signature. A model holding
         # the pick's terms and more is no alternative: scoring like the pick only says that
         # its extra term is not needed.
-        if (best["label"] == "sinusoid" or m is best or m["label"] == "sinusoid"
-                or min(m["delta_elpd_halves"]) <= 0
+        if (m is best or m["label"] == "sinusoid" or min(m["delta_elpd_halves"]) <= 0
                 or best_terms < set(m["label"].split("+"))):
             continue
         delta, se, _, _ = score(best_res, results[m["label"]][1])

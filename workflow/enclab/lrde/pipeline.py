@@ -115,8 +115,9 @@ def _run_fits(t, counts, step, jobs, threads):
 
 
 def _alternative_kwargs(t, counts, step, comparison, added, common, settings):
-    """Sampler arguments of each model the comparison could not tell from its pick (with the
-    truth channel's added effects, like the pick)."""
+    """Sampler arguments of each model the comparison could not tell from its pick or, beside
+    a kept sinusoid, did not rule out (with the truth channel's added effects, like the
+    pick)."""
     out = []
     for _, harmonics, own, point in compare.alternative_terms(comparison) if comparison else ():
         effects = own + tuple(e for e in added if e not in own)
