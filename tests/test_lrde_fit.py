@@ -350,3 +350,34 @@ def test_walkers_are_raised_to_twice_the_parameters_of_a_rich_model():
                          n_walkers=16, n_steps=50, n_burn=10, harmonics=(2, 3))
     assert len(r.param_names) == 9
     assert r.chains.shape[2] == 18 and r.settings["n_walkers"] == 18
+
+
+def test_with_harmonics_A12_is_the_peak_to_peak_stroke_of_the_whole_motion():
+    # sin(phi) + s3 sin(3 phi) peaks at phi = pi/2 for |s3| < A/18: a stroke of A12 - 2 s3,
+    # 0.2 step above the fundamental's here.
+    A12, s3 = 3.7 * STEP, -0.1 * STEP
+    df, p = simulate.open_loop_log(np.random.default_rng(5), A12=A12, bias=0.15 * STEP,
+                                   offset_frac=0.35, n_cycles=12, noise_std=0.005 * STEP,
+                                   distortion={3: (0.0, s3)})
+    r = fit.fit_sinusoid(df["t"].to_numpy(), df["counts"].to_numpy(), STEP, seed=2,
+                         harmonics=(3,), **SMALL)
+    names = list(r.param_names)
+    stroke = model.stroke_and_midpoint(r.samples[:, 0], (3,), r.samples[:, [names.index("c3")]],
+                                       r.samples[:, [names.index("s3")]])[0]
+    np.testing.assert_array_equal(r.stroke, stroke)
+    q05, q50, q95 = np.quantile(stroke, [0.05, 0.5, 0.95])
+    assert r.summary["A12"] == {"median": q50, "q05": q05, "q95": q95}
+    assert r.summary["A12_fundamental"]["median"] == np.median(r.samples[:, 0])
+    # The reported stroke is near the true one and away from the fundamental's.
+    width = q95 - q05
+    assert abs(q50 - (A12 - 2 * s3)) < width < abs(q50 - A12)
+    # A sine alone reports its A12 column as the stroke.
+    sine = fit.fit_sinusoid(df["t"].to_numpy(), df["counts"].to_numpy(), STEP, seed=2, **SMALL)
+    assert sine.stroke_samples is None and "A12_fundamental" not in sine.summary
+    np.testing.assert_array_equal(sine.stroke, sine.samples[:, 0])
+    # Pooled, each fit contributes its stroke; restricted, the per-sample arrays stay paired.
+    pooled = fit.pool_fits([sine, r])
+    picks = np.round(np.linspace(0, r.samples.shape[0] - 1, sine.samples.shape[0])).astype(int)
+    both = np.concatenate((sine.samples[:, 0], stroke[picks]))
+    assert pooled.summary["A12"]["median"] == np.median(both)
+    np.testing.assert_array_equal(r.take([3, 1]).stroke, stroke[[3, 1]])

@@ -156,3 +156,48 @@ def test_dc_component_rejects_out_of_band():
         model.dc_component(0.6 * model.epsilon(A12, STEP), A12, STEP, 2)
     with pytest.raises(ValueError, match="A12"):
         model.dc_component(0.0, 5.5 * STEP, STEP, 2)
+
+
+def _extremes_by_bounded_search(A12, orders, c, s):
+    """Independent reference: bounded scalar searches around a dense grid's extremes."""
+    from scipy.optimize import minimize_scalar
+
+    def theta(phi):
+        return 0.5 * A12 * np.sin(phi) + sum(ck * np.cos(k * phi) + sk * np.sin(k * phi)
+                                             for k, ck, sk in zip(orders, c, s))
+    grid = np.linspace(0.0, 2.0 * np.pi, 20001)
+    values = theta(grid)
+    out = []
+    for sign in (1.0, -1.0):
+        i = int(np.argmax(sign * values))
+        res = minimize_scalar(lambda p: -sign * theta(p), bounds=(grid[i] - 1e-3, grid[i] + 1e-3),
+                              method="bounded", options={"xatol": 1e-12})
+        out.append(max(sign * values[i], -res.fun) * sign)
+    return out[0] - out[1], 0.5 * (out[0] + out[1])
+
+
+def test_stroke_and_midpoint_match_a_bounded_search_and_the_sine_cases():
+    rng = np.random.default_rng(11)
+    n = 40
+    A12 = rng.uniform(2.0, 5.0, n)
+    orders = (2, 3, 5)
+    # Up to 0.6 of the fundamental's amplitude: several local extrema per cycle.
+    c = rng.uniform(-0.6, 0.6, (n, 3)) * A12[:, None] / 2
+    s = rng.uniform(-0.6, 0.6, (n, 3)) * A12[:, None] / 2
+    stroke, mid = model.stroke_and_midpoint(A12, orders, c, s)
+    for i in range(n):
+        ref_stroke, ref_mid = _extremes_by_bounded_search(A12[i], orders, c[i], s[i])
+        assert stroke[i] == pytest.approx(ref_stroke, abs=1e-10 * A12[i])
+        assert mid[i] == pytest.approx(ref_mid, abs=1e-10 * A12[i])
+    # A pure sine: 2 A about its mean.
+    stroke, mid = model.stroke_and_midpoint(A12, (), np.zeros((n, 0)), np.zeros((n, 0)))
+    np.testing.assert_allclose(stroke, A12, rtol=1e-15)
+    np.testing.assert_allclose(mid, 0.0, atol=1e-15 * A12.max())
+    # sin(phi) + s3 sin(3 phi) with s3 < A/18 peaks at phi = pi/2: stroke A12 - 2 s3; odd
+    # harmonics keep the extremes symmetric about the mean.
+    s3 = rng.uniform(-1.0, 1.0, n) * A12 / 40
+    stroke, mid = model.stroke_and_midpoint(A12, (3,), np.zeros((n, 1)), s3[:, None])
+    np.testing.assert_allclose(stroke, A12 - 2 * s3, rtol=1e-13)
+    np.testing.assert_allclose(mid, 0.0, atol=1e-13 * A12.max())
+    with pytest.raises(ValueError, match=">= 2"):
+        model.stroke_and_midpoint(A12, (1,), np.zeros((n, 1)), np.zeros((n, 1)))

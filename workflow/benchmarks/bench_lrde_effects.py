@@ -24,7 +24,9 @@ with equal weights as the stage reports them (``after``), with the sampler
 settings of ``config.yaml`` (``--n-walkers`` etc.). Recorded: the chosen model, whether it names
 the right term, the predictive check, 90 % intervals of ``A12`` and ``E_b`` before and after
 (``E_b`` relative to count 0 in the frame of the longer segment for a jump) and of the pick's
-own fit (``pick``, the same as ``after`` unless pooled), convergence and wall time.
+own fit (``pick``, the same as ``after`` unless pooled), convergence and wall time. ``A12``
+is the peak-to-peak stroke (eq. 2) of the true and of the fitted motion; a 3rd harmonic
+leaves the bias (the extremes' midpoint) where the mean is.
 
 A draw's effect is *named* when the chosen model contains its term, and *identified* when it
 is named or the comparison lists its term among the models not distinguishable from the pick
@@ -45,6 +47,8 @@ Usage::
         --cycles 20 100
     python workflow/benchmarks/bench_lrde_effects.py --draws 10 --clean-draws 20 --cycles 20
     python workflow/benchmarks/bench_lrde_effects.py --cycles 20 --shard 1/2   # half of a run
+    python workflow/benchmarks/bench_lrde_effects.py --redo some_draws.csv --out redone
+    python workflow/benchmarks/bench_lrde_effects.py --from-draws all.csv redone/lrde_effects_draws.csv
 
 Writes ``<out>/lrde_effects_draws.csv`` and ``<out>/lrde_effects_summary.csv``.
 """
@@ -78,7 +82,9 @@ def _log_uniform(rng, lo, hi):
 def simulate_case(rng, case, n_cycles, fs_hz=2000.0, f_nominal=20.0, noise_frac=0.005):
     """``(t, counts, truth)``: one benchmark log with the effect of ``case`` at a random size.
 
-    ``truth`` holds ``A12``, ``E_b`` (count-0 frame of the reference segment), ``size`` (the
+    ``truth`` holds ``A12`` (the simulator's: twice the fundamental's amplitude), ``stroke``
+    (the motion's peak-to-peak stroke, eq. 2: ``A12`` unless harmonics distort the motion, and
+    the estimand scored), ``E_b`` (count-0 frame of the reference segment), ``size`` (the
     effect's size in the unit of the table above: step fraction, relative drift, step) and
     the simulator arguments.
     """
@@ -113,8 +119,14 @@ def simulate_case(rng, case, n_cycles, fs_hz=2000.0, f_nominal=20.0, noise_frac=
         size = rng.uniform(0.005, 0.1)
         kw["noise_std"] = size * STEP
     counts = effects.simulate_counts(rng, t, STEP, A12, a_eq, f_hz, phase, **kw)
-    return t, counts, {"A12": A12, "E_b": e_b_ref, "size": size, "f_hz": f_hz, "phase": phase,
-                       "a_eq": a_eq, "simulator": kw}
+    stroke = A12
+    if "harmonics" in kw:
+        orders = tuple(kw["harmonics"])
+        stroke = float(model.stroke_and_midpoint(
+            A12, orders, [[kw["harmonics"][k][0] for k in orders]],
+            [[kw["harmonics"][k][1] for k in orders]])[0][0])
+    return t, counts, {"A12": A12, "stroke": stroke, "E_b": e_b_ref, "size": size, "f_hz": f_hz,
+                       "phase": phase, "a_eq": a_eq, "simulator": kw}
 
 
 def _interval(result, name):
@@ -132,7 +144,7 @@ def one_draw(case, n_cycles, seed, sampler):
     fit_seed, compare_seed, after_seed, alternatives_seed = root.spawn(4)
     started = time.perf_counter()
     row = {"case": case, "cycles": n_cycles, "seed": seed, "size": truth["size"],
-           "A12_true": truth["A12"], "E_b_true": truth["E_b"]}
+           "A12_true": truth["stroke"], "E_b_true": truth["E_b"]}
     try:
         comp = compare.compare_effect_models(t, counts, STEP, compare_seed)
     except ValueError as err:
@@ -174,7 +186,7 @@ def one_draw(case, n_cycles, seed, sampler):
     for label, r in (("before", before), ("after", after), ("pick", pick)):
         for name in ("A12", "E_b"):
             lo, hi = _interval(r, name)
-            true = truth[name]
+            true = row[f"{name}_true"]
             row[f"{name}_{label}_q05"], row[f"{name}_{label}_q95"] = lo, hi
             row[f"{name}_{label}_cover"] = bool(lo <= true <= hi)
             miss = max(lo - true, true - hi, 0.0)
@@ -274,7 +286,12 @@ def main(argv=None):
                     help="stop drawing after this many seconds (rows so far are kept)")
     ap.add_argument("--out", default=str(ROOT / "results" / "benchmarks"))
     ap.add_argument("--from-draws", default=None, metavar="CSV", nargs="+",
-                    help="only summarise existing lrde_effects_draws.csv files (concatenated)")
+                    help="only summarise existing lrde_effects_draws.csv files (concatenated; "
+                         "a draw listed again, same cycles, case and seed, takes the later "
+                         "file's row)")
+    ap.add_argument("--redo", default=None, metavar="CSV",
+                    help="run again the draws (cycles, case, seed) of this draws CSV, e.g. "
+                         "the ones a change can affect; merge with --from-draws")
     ap.add_argument("--first-draw", type=int, default=0,
                     help="index of the first draw per case (continue an earlier run)")
     ap.add_argument("--shard", default="0/1", metavar="K/N",
@@ -286,6 +303,7 @@ def main(argv=None):
         out = pathlib.Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
         draws = pd.concat([pd.read_csv(p) for p in args.from_draws], ignore_index=True)
+        draws = draws.drop_duplicates(["cycles", "case", "seed"], keep="last")
         draws.to_csv(out / "lrde_effects_draws.csv", index=False)
         summary = stamp(summarise(draws))
         summary.to_csv(out / "lrde_effects_summary.csv", index=False)
@@ -301,7 +319,11 @@ def main(argv=None):
         ap.error(f"--shard {args.shard}: K must be in 0..N-1")
     # Interleave cases so that a time budget cuts every case to about the same size.
     tasks = []
-    for cycles in args.cycles:
+    if args.redo:
+        redo = pd.read_csv(args.redo)
+        tasks = [(r.case, int(r.cycles), int(r.seed)) for r in redo.itertuples()
+                 if int(r.Index) % n == k]
+    for cycles in ([] if args.redo else args.cycles):
         n_max = max(args.draws, args.clean_draws)
         for i in range(args.first_draw, n_max):
             for case in args.cases:

@@ -74,8 +74,7 @@ def heldout_elpd(result, t, counts, f_hz, n_draws, rng) -> np.ndarray:
     """
     pick = rng.choice(result.samples.shape[0], size=min(n_draws, result.samples.shape[0]),
                       replace=False)
-    sub = lrde_fit.FitResult(**{**result.__dict__, "samples": result.samples[pick]})
-    ll = pointwise_log_likelihood(sub, t, counts)
+    ll = pointwise_log_likelihood(result.take(pick), t, counts)
     unit = np.floor((t - t[0]) * f_hz).astype(np.int64)
     per_unit = np.stack([np.bincount(unit, weights=row) for row in ll])
     return logsumexp(per_unit, axis=0) - np.log(per_unit.shape[0])
@@ -83,8 +82,7 @@ def heldout_elpd(result, t, counts, f_hz, n_draws, rng) -> np.ndarray:
 
 def _max_loglik(result, t, counts) -> float:
     pick = np.linspace(0, result.samples.shape[0] - 1, min(2000, result.samples.shape[0]))
-    sub = lrde_fit.FitResult(**{**result.__dict__,
-                                "samples": result.samples[pick.astype(np.int64)]})
+    sub = result.take(pick.astype(np.int64))
     return float(pointwise_log_likelihood(sub, t, counts).sum(axis=1).max())
 
 

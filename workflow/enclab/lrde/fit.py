@@ -12,6 +12,12 @@ standard deviation ``sigma`` is read as ``count = floor((theta + noise + a) / st
 - ``f_hz``; ``phase`` (rad, at ``t_ref``, the middle of the log, which decorrelates it from
   ``f``); ``sigma`` (rad, sampled as ``log10(sigma / step)``).
 
+Harmonic distortion (``harmonics``) adds ``c_k cos(k phi) + s_k sin(k phi)``; the sampled
+``A12`` is then twice the fundamental's amplitude, and the reported ``A12`` is the peak-to-peak
+stroke of the whole motion, eq. (2)'s ``A1 + A2`` (the turning points the readings see).
+``E_b`` and ``a_eq`` stay those of the motion's mean, which is the midpoint of the extremes
+for odd harmonics (and for a sine) but not for even ones.
+
 Likelihood
 ----------
 Each reading is an interval: ``P(count = k) = Phi(u) - Phi(l)``, ``u = (k + 1 - z)/s``,
@@ -323,6 +329,10 @@ class FitResult:
     b_samples : numpy.ndarray or None
         Draws of the bias ``b`` paired with ``a_eq_samples`` when it is identified (truth
         channel or rest position), else None.
+    stroke_samples : numpy.ndarray or None
+        Peak-to-peak stroke of the motion per sample when harmonics distort it
+        (:func:`enclab.lrde.model.stroke_and_midpoint`), else None: the ``A12`` column, twice
+        the fundamental's amplitude, is then the stroke itself.
     """
 
     param_names: tuple
@@ -346,6 +356,21 @@ class FitResult:
     wall_time_s: float
     settings: dict = field(default_factory=dict)
     b_samples: np.ndarray | None = None
+    stroke_samples: np.ndarray | None = None
+
+    def take(self, rows) -> "FitResult":
+        """The same posterior restricted to the sample rows ``rows`` (per-sample arrays alike;
+        summary and diagnostics are the full posterior's)."""
+        per_sample = {k: (None if v is None else v[rows])
+                      for k, v in (("samples", self.samples), ("a_eq_samples", self.a_eq_samples),
+                                   ("b_samples", self.b_samples),
+                                   ("stroke_samples", self.stroke_samples))}
+        return FitResult(**{**self.__dict__, **per_sample})
+
+    @property
+    def stroke(self) -> np.ndarray:
+        """Peak-to-peak stroke per sample (eq. 2's ``A12 = A1 + A2``), rad."""
+        return self.samples[:, 0] if self.stroke_samples is None else self.stroke_samples
 
     @property
     def harmonics(self) -> tuple:
@@ -670,7 +695,9 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
     harmonics : tuple of int
         Orders of harmonic distortion of the motion to fit (e.g. ``(3,)``): each adds
         ``c_k cos(k phi) + s_k sin(k phi)`` (rad, uniform prior on ``+-step/2``), reported as
-        ``c<k>``, ``s<k>``. ``A12`` is then twice the fundamental's amplitude. See
+        ``c<k>``, ``s<k>``. The reported ``A12`` is then the motion's peak-to-peak stroke
+        (eq. 2; ``stroke_samples``) and ``A12_fundamental`` twice the fundamental's amplitude
+        (the ``A12`` column of ``samples``). See
         :func:`compare_motion_models` for choosing them on held-out data.
     effects : tuple of str
         Encoder and clock effects of the reading model (:mod:`enclab.lrde.effects`), reported
@@ -764,6 +791,10 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
     a_eq = (centre + 0.5) * step + samples[:, 1]
     summary = {name: _quantiles(samples[:, i]) for i, name in enumerate(names)}
     summary["a_eq"] = _quantiles(a_eq)
+    stroke = _stroke_samples(samples, names, harmonics)
+    if stroke is not None:
+        summary["A12_fundamental"] = summary["A12"]
+        summary["A12"] = _quantiles(stroke)
     offset_a = bias_b = b_draws = None
     reason = _UNIDENTIFIED
     if truth is not None:
@@ -814,8 +845,18 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
                   "n_burn": n_burn, "bounds_internal": bounds.tolist(),
                   "harmonics": list(harmonics), "effects": list(effects),
                   "extra_scale": list(setup["extra_scale"]), "sigma_prior": sigma_prior},
-        b_samples=b_draws,
+        b_samples=b_draws, stroke_samples=stroke,
     )
+
+
+def _stroke_samples(samples, names, harmonics):
+    """Peak-to-peak stroke per SI sample row of a model with harmonics, else None."""
+    if not harmonics:
+        return None
+    names = list(names)
+    c = samples[:, [names.index(f"c{k}") for k in harmonics]]
+    s = samples[:, [names.index(f"s{k}") for k in harmonics]]
+    return model.stroke_and_midpoint(samples[:, 0], harmonics, c, s)[0]
 
 
 def pool_fits(fits) -> FitResult:
@@ -864,6 +905,11 @@ def pool_fits(fits) -> FitResult:
     a_eq = np.concatenate([f.a_eq_samples[i] for f, i in zip(fits, picks)])
     summary = {name: _quantiles(samples[:, j]) for j, name in enumerate(names)}
     summary["a_eq"] = _quantiles(a_eq)
+    stroke = None
+    if any(f.stroke_samples is not None for f in fits):
+        stroke = np.concatenate([f.stroke[i] for f, i in zip(fits, picks)])
+        summary["A12_fundamental"] = summary["A12"]
+        summary["A12"] = _quantiles(stroke)
     b = None
     offset_a = bias_b = None
     if all(f.b_samples is not None for f in fits):
@@ -883,7 +929,7 @@ def pool_fits(fits) -> FitResult:
         wall_time_s=float(sum(f.wall_time_s for f in fits)),
         settings={k: v for k, v in first.settings.items()
                   if k not in ("harmonics", "effects", "extra_scale", "bounds_internal")}
-        | {"pooled": labels}, b_samples=b)
+        | {"pooled": labels}, b_samples=b, stroke_samples=stroke)
 
 
 def map_fit(t, counts, step, f_hz=None, harmonics=(), effects=(), start=None,

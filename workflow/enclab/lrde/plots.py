@@ -42,6 +42,7 @@ def corner_plot(fit, truths: dict | None = None) -> Figure:
               r"$\sigma$ [deg]"] + [effect_axes[name][1] if name in effect_axes
                                     else f"${name[0]}_{{{name[1:]}}}$ [deg]" for name in extra]
     data = fit.samples * scale
+    data[:, 0] = fit.stroke * _DEG  # the reported stroke (peak to peak, also with harmonics)
     truth_values = None
     if truths is not None:
         truth_values = [truths[name] * s if truths.get(name) is not None else None

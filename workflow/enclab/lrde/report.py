@@ -115,7 +115,8 @@ def motion_model_block(comparison: dict | None, reason: str | None = None) -> di
                                  "s": _triple(chosen_fit.summary[f"s{k}"]),
                                  "amplitude": _quantile_triple(np.hypot(c, s))}
         out["harmonics"] = harmonics
-        out["A12_fundamental"] = _triple(chosen_fit.summary["A12"])
+        out["A12_fundamental"] = _triple(chosen_fit.summary.get("A12_fundamental",
+                                                                chosen_fit.summary["A12"]))
         out["converged"] = bool(chosen_fit.converged)
     return out
 
@@ -177,7 +178,9 @@ def effect_model_block(comparison: dict | None, chosen_fit=None, reason: str | N
     Keys: ``chosen`` (label, ``"sinusoid"`` when no term is added), ``harmonics``,
     ``effects``, ``signature`` (per chosen effect), ``params`` (the chosen fit's effect and
     harmonic parameters, ``{median, q05, q95}`` in SI units: hysteresis rad, drift 1/s,
-    time_jitter s, ``c<k>``/``s<k>`` rad; plus ``drift_over_log`` (relative frequency change
+    time_jitter s, ``c<k>``/``s<k>`` rad and, with harmonics, ``A12_fundamental``, twice the
+    fundamental's amplitude, beside the reported ``A12``, the distorted motion's peak-to-peak
+    stroke; plus ``drift_over_log`` (relative frequency change
     over ``duration_s``) and ``jump`` as given: ``{index, time_s, delta, probability}``),
     ``indistinguishable``, ``not_ruled_out`` and ``note``, ``delta_bic``, ``models``
     (held-out scores per candidate), ``check`` (the calibrated predictive check), ``rule``;
@@ -232,6 +235,9 @@ def effect_params(chosen_fit=None, duration_s: float | None = None,
         extra = list(chosen_fit.param_names[5:])
         for name in extra:
             params[name] = _triple(chosen_fit.summary[name])
+        if "A12_fundamental" in chosen_fit.summary:
+            # A12 reports the distorted motion's stroke; this is its fundamental's.
+            params["A12_fundamental"] = _triple(chosen_fit.summary["A12_fundamental"])
         if "drift" in extra and duration_s:
             params["drift_over_log"] = {k: _num(v * duration_s)
                                         for k, v in chosen_fit.summary["drift"].items()}
