@@ -247,6 +247,15 @@ def test_an_effect_the_model_cannot_hold_flags_the_estimates_it_biases():
     trust = report.trust_block(fit_stub, block)
     assert [k for k, v in trust.items() if not v["trusted"]] == ["E_b", "a_eq", "offset_a"]
     assert "slow_drift" in trust["a_eq"]["reason"]
+    # A dead band the truth channel does not confirm stands for the motion: the stroke.
+    unconfirmed = {"term": "hysteresis", "status": "not confirmed by the truth channel"}
+    block["reference"] = {"truth": "fine", "explained": True, "not_modelled": [],
+                          "terms": [unconfirmed]}
+    trust = report.trust_block(fit_stub, block)
+    assert [k for k, v in trust.items() if not v["trusted"]] == ["A12"]
+    assert "no dead band" in trust["A12"]["reason"]
+    block["reference"]["terms"] = [dict(unconfirmed, status="found by both")]
+    assert all(v["trusted"] for v in report.trust_block(fit_stub, block).values())
     block["reference"] = {"truth": "fine", "explained": False, "not_modelled": []}
     assert not any(v["trusted"] for v in report.trust_block(fit_stub, block).values())
     assert all(v["trusted"] for v in report.trust_block(fit_stub, {"check": {}}).values())

@@ -307,13 +307,23 @@ def reference_block(reference: dict | None, model_block: dict, added: list) -> d
             "added": list(added), "terms": terms}
 
 
+# What a term the truth channel does not confirm leaves the fitted motion unable to say: the
+# estimates that rest on the term's reading being the encoder's.
+_UNCONFIRMED_BIASES = {
+    "hysteresis": (("A12",), "the truth channel shows no dead band, so the model's hysteresis "
+                   "stands for the motion at its turning points and the fitted motion's stroke "
+                   "is not the shaft's"),
+}
+
+
 def trust_block(fit, model_block: dict) -> dict:
     """Per reported quantity ``{trusted, reason}``.
 
     A quantity is untrusted when the chosen model fails the predictive check (its readings
     are explained worse than its own simulations are), when its sampler did not converge,
     when the truth channel (``model_block["reference"]``) shows an effect that breaks an
-    assumption the quantity rests on or leaves the readings unexplained, or (``offset_a``,
+    assumption the quantity rests on, leaves the readings unexplained or does not confirm a
+    term the quantity rests on (the dead band: the stroke), or (``offset_a``,
     ``bias_b``) when it is not identified at all.
     """
     reasons = []
@@ -333,6 +343,9 @@ def trust_block(fit, model_block: dict) -> dict:
         r = list(reasons)
         r += [f"the truth channel shows {e['residual_effect']}, which this model has no term "
               f"for ({e['why']})" for e in ref.get("not_modelled", []) if key in e["biases"]]
+        r += [_UNCONFIRMED_BIASES[row["term"]][1] for row in ref.get("terms", [])
+              if row["status"] == "not confirmed by the truth channel"
+              and key in _UNCONFIRMED_BIASES.get(row["term"], ((), ""))[0]]
         if fit.summary.get(key) is None:
             r = ["not identified (readings give only a_eq = a + b)"]
         out[key] = {"trusted": not r, "reason": "; ".join(r) if r else None}
