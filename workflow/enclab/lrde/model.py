@@ -475,9 +475,6 @@ def dc_component_numeric(E_b, A12, step, n_points=200_000) -> float:
     return float(step * counts.mean())
 
 
-# Evaluation of the sinusoid on a uniform time grid (the likelihoods of enclab.lrde.fit and
-# enclab.lrde.effects share it).
-
 def stroke_and_midpoint(A12_fundamental, harmonics, c, s, n_grid=512, chunk=4096):
     """Peak-to-peak stroke and midpoint of the extremes of a distorted periodic motion.
 
@@ -545,6 +542,9 @@ def stroke_and_midpoint(A12_fundamental, harmonics, c, s, n_grid=512, chunk=4096
             out[rows] = np.where(sign * value > sign * best, value, best)
     return top - bottom, 0.5 * (top + bottom)
 
+
+# Evaluation of the sinusoid on a uniform time grid (the likelihoods of enclab.lrde.fit and
+# enclab.lrde.effects share it).
 
 def uniform_grid(t, rtol=1e-9):
     """``(t0, dt, n)`` when ``t`` is an arithmetic sequence to within ``rtol * dt``, else None.
