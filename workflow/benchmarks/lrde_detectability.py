@@ -21,7 +21,7 @@ Usage (from the repository root)::
     .venv/bin/python workflow/benchmarks/lrde_detectability.py \\
         --draws results/benchmarks/lrde_effects_draws.csv --cycles 20
     # after a change that leaves the likelihood alone: keep the gains already computed
-    .venv/bin/python workflow/benchmarks/lrde_detectability.py --cycles 20 \
+    .venv/bin/python workflow/benchmarks/lrde_detectability.py --cycles 20 \\
         --reuse results/benchmarks/lrde_detectability_draws.csv --out results/benchmarks
 
 Writes ``<out>/lrde_detectability_draws.csv`` and ``<out>/lrde_detectability.csv``.

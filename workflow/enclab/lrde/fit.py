@@ -792,9 +792,7 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
     summary = {name: _quantiles(samples[:, i]) for i, name in enumerate(names)}
     summary["a_eq"] = _quantiles(a_eq)
     stroke = _stroke_samples(samples, names, harmonics)
-    if stroke is not None:
-        summary["A12_fundamental"] = summary["A12"]
-        summary["A12"] = _quantiles(stroke)
+    _report_stroke(summary, stroke)
     offset_a = bias_b = b_draws = None
     reason = _UNIDENTIFIED
     if truth is not None:
@@ -859,6 +857,14 @@ def _stroke_samples(samples, names, harmonics):
     return model.stroke_and_midpoint(samples[:, 0], harmonics, c, s)[0]
 
 
+def _report_stroke(summary, stroke):
+    """With harmonics (``stroke`` not None), ``A12`` reports the stroke and the fundamental's
+    moves to ``A12_fundamental``."""
+    if stroke is not None:
+        summary["A12_fundamental"] = summary["A12"]
+        summary["A12"] = _quantiles(stroke)
+
+
 def pool_fits(fits) -> FitResult:
     """One posterior of ``A12, E_b, f_hz, phase, sigma`` from the fits of several models, with
     equal weights.
@@ -908,8 +914,7 @@ def pool_fits(fits) -> FitResult:
     stroke = None
     if any(f.stroke_samples is not None for f in fits):
         stroke = np.concatenate([f.stroke[i] for f, i in zip(fits, picks)])
-        summary["A12_fundamental"] = summary["A12"]
-        summary["A12"] = _quantiles(stroke)
+    _report_stroke(summary, stroke)
     b = None
     offset_a = bias_b = None
     if all(f.b_samples is not None for f in fits):

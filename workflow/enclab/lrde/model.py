@@ -531,8 +531,8 @@ def stroke_and_midpoint(A12_fundamental, harmonics, c, s, n_grid=512, chunk=4096
         rows = np.arange(lo, min(lo + chunk, half_a.size))
         motion = coef[rows] @ basis
         for out, pick, sign in ((top, np.argmax, 1.0), (bottom, np.argmin, -1.0)):
-            x = phi[pick(motion, axis=1)]
-            best = motion[np.arange(rows.size), pick(motion, axis=1)]
+            at = pick(motion, axis=1)
+            x, best = phi[at], motion[np.arange(rows.size), at]
             for _ in range(4):
                 _, f1, f2 = derivatives(x, rows)
                 with np.errstate(divide="ignore", invalid="ignore"):

@@ -338,14 +338,15 @@ def trust_block(fit, model_block: dict) -> dict:
     if ref and not ref.get("explained", True):
         reasons.append(f"against the truth channel ({ref.get('truth')}) the readings hold more "
                        "than any named effect explains")
+    unconfirmed = [_UNCONFIRMED_BIASES[row["term"]] for row in ref.get("terms", [])
+                   if row["status"] == "not confirmed by the truth channel"
+                   and row["term"] in _UNCONFIRMED_BIASES]
     out = {}
     for key in _ESTIMATES:
         r = list(reasons)
         r += [f"the truth channel shows {e['residual_effect']}, which this model has no term "
               f"for ({e['why']})" for e in ref.get("not_modelled", []) if key in e["biases"]]
-        r += [_UNCONFIRMED_BIASES[row["term"]][1] for row in ref.get("terms", [])
-              if row["status"] == "not confirmed by the truth channel"
-              and key in _UNCONFIRMED_BIASES.get(row["term"], ((), ""))[0]]
+        r += [why for biases, why in unconfirmed if key in biases]
         if fit.summary.get(key) is None:
             r = ["not identified (readings give only a_eq = a + b)"]
         out[key] = {"trusted": not r, "reason": "; ".join(r) if r else None}
