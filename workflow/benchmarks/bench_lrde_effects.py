@@ -49,6 +49,8 @@ Usage::
     python workflow/benchmarks/bench_lrde_effects.py --cycles 20 --shard 1/2   # half of a run
     python workflow/benchmarks/bench_lrde_effects.py --redo some_draws.csv --out redone
     python workflow/benchmarks/bench_lrde_effects.py --from-draws all.csv redone/lrde_effects_draws.csv
+    python workflow/benchmarks/bench_lrde_effects.py --from-draws more/lrde_effects_draws.csv \\
+        --pool-with docs/benchmarks/lrde_effects_summary.csv    # continue a run kept as a summary
 
 Writes ``<out>/lrde_effects_draws.csv`` and ``<out>/lrde_effects_summary.csv``.
 """
@@ -221,7 +223,10 @@ def threshold(size, named):
     return float(10 ** (x.mean() - p[0] / p[1]))
 
 
-def summarise(draws: pd.DataFrame) -> pd.DataFrame:
+def summarise(draws: pd.DataFrame, thresholds: dict | None = None) -> pd.DataFrame:
+    """Summary rows per (cycles, case); ``thresholds`` maps (cycles, case) to a detection
+    threshold to count against instead of the one these draws' logistic fit gives."""
+    thresholds = thresholds or {}
     rows = []
     for (cycles, case), g in draws.groupby(["cycles", "case"]):
         g = g[g["chosen"].notna()]
@@ -237,7 +242,7 @@ def summarise(draws: pd.DataFrame) -> pd.DataFrame:
                "identified_rate": k_id / n if n else np.nan,
                "identified_ci_lo": id_lo, "identified_ci_hi": id_hi}
         if case in ("hysteresis", "drift", "harmonic"):
-            th = threshold(g["size"], g["identified"])
+            th = thresholds.get((cycles, case), threshold(g["size"], g["identified"]))
             row["threshold"] = th
             big = g[g["size"] >= 3 * th] if np.isfinite(th) else g.iloc[0:0]
             row["n_at_3x"] = len(big)
@@ -267,6 +272,62 @@ def summarise(draws: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+RATES = ("named_rate", "identified_rate", "A12_cover_before", "E_b_cover_before",
+         "A12_cover_after", "E_b_cover_after", "confident_miss_rate", "untrusted_rate",
+         "pooled_rate", "converged_after")
+
+
+def _count(rate, n):
+    """The count behind a rate of ``n`` draws (a table keeps 4 significant digits)."""
+    return float(np.rint(rate * n)) if n else 0.0
+
+
+def pool_summaries(earlier: pd.DataFrame, draws: pd.DataFrame) -> pd.DataFrame:
+    """Summary rows of ``draws`` pooled with an ``earlier`` summary of *other* draws.
+
+    For a run continued whose earlier per-draw rows are gone but whose summary is kept: per
+    (cycles, case) in both, every rate becomes a count (rate x n), counts add and the Wilson
+    intervals come from the sums. The detection threshold is the earlier row's, and ``draws``
+    are counted at 3x of it. A median does not pool, so ``median_wall_s`` is left empty (the
+    two runs' rows keep theirs). Draws must not repeat: their seeds are the caller's to keep
+    apart (``--first-draw``)."""
+    earlier = earlier.drop(columns=[c for c in ("date", "machine", "command") if c in earlier])
+    keys = {(int(r.cycles), r.case): r for r in earlier.itertuples(index=False)}
+    later = summarise(draws, {k: r.threshold for k, r in keys.items()
+                              if np.isfinite(getattr(r, "threshold", np.nan))})
+    rows = []
+    for new in later.to_dict("records"):
+        key = (int(new["cycles"]), new["case"])
+        if key not in keys:
+            continue
+        old = keys[key]._asdict()
+        n = int(old["n"] + new["n"])
+        row = {"cycles": key[0], "case": key[1], "n": n}
+        for name in RATES:
+            a, b = old.get(name, np.nan), new.get(name, np.nan)
+            row[name] = ((_count(a, old["n"]) + _count(b, new["n"])) / n
+                         if np.isfinite(a) and np.isfinite(b) else np.nan)
+        for name, lo, hi in (("named_rate", "named_ci_lo", "named_ci_hi"),
+                             ("identified_rate", "identified_ci_lo", "identified_ci_hi")):
+            if key[1] != "all":
+                row[lo], row[hi] = wilson(int(round(row[name] * n)), n)
+        if np.isfinite(old.get("threshold", np.nan)):
+            row["threshold"] = old["threshold"]
+            n3 = int(old["n_at_3x"] + new["n_at_3x"])
+            row["n_at_3x"] = n3
+            for name in ("named_at_3x", "identified_at_3x"):
+                k3 = sum(_count(r[name], int(r["n_at_3x"])) for r in (old, new)
+                         if r["n_at_3x"] > 0)
+                row[name] = k3 / n3 if n3 else np.nan
+        if key[1] != "all":
+            confused = {c for r in (old, new) if isinstance(r.get("confused_with"), str)
+                        for c in r["confused_with"].split("|")}
+            row["confused_with"] = "|".join(sorted(confused))
+        row["median_wall_s"] = np.nan
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--draws", type=int, default=100,
@@ -289,6 +350,10 @@ def main(argv=None):
                     help="only summarise existing lrde_effects_draws.csv files (concatenated; "
                          "a draw listed again, same cycles, case and seed, takes the later "
                          "file's row)")
+    ap.add_argument("--pool-with", default=None, metavar="SUMMARY_CSV",
+                    help="with --from-draws: also pool those draws with this earlier summary "
+                         "of other draws (pool_summaries); the output keeps the earlier rows, "
+                         "the new draws' rows and the pooled rows")
     ap.add_argument("--redo", default=None, metavar="CSV",
                     help="run again the draws (cycles, case, seed) of this draws CSV, e.g. "
                          "the ones a change can affect; merge with --from-draws")
@@ -306,6 +371,10 @@ def main(argv=None):
         draws = draws.drop_duplicates(["cycles", "case", "seed"], keep="last")
         draws.to_csv(out / "lrde_effects_draws.csv", index=False)
         summary = stamp(summarise(draws))
+        if args.pool_with:
+            earlier = pd.read_csv(args.pool_with)
+            summary = pd.concat([earlier, summary, stamp(pool_summaries(earlier, draws))],
+                                ignore_index=True)
         summary.to_csv(out / "lrde_effects_summary.csv", index=False)
         with pd.option_context("display.width", 250, "display.max_columns", 40):
             print(summary)
