@@ -50,6 +50,10 @@ TABLES = [
     ("lrde_detectability.csv", "Low-resolution encoder: which logs hold the evidence",
      "Named rates at 3x the detection threshold, overall and among the logs whose readings favour "
      "the true model over the sinusoid's fit (oracle BIC gain > 0; `lrde_detectability.py`)."),
+    ("lrde_misfit_trace.csv", "Low-resolution encoder: effects outside the catalogue",
+     "The localized check on catalogued effects (false flags) and on effects no candidate "
+     "describes (flagged, placed on the covariate where they act, or misnamed; "
+     "`lrde_misfit_trace.py`)."),
     ("lrde_calibration.csv", "Low-resolution encoder: the posterior's own calibration",
      "Coverage of the 90 % intervals when the true model is fitted (no comparison, no pooling), "
      "and of E_b's posterior with every other parameter at the truth (`lrde_calibration.py`)."),

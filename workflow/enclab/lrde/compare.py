@@ -39,8 +39,8 @@ from enclab.lrde import fit as lrde_fit
 from enclab.lrde.effects import model_label
 
 __all__ = ["pointwise_log_likelihood", "heldout_elpd", "compare_motion_models",
-           "compare_effect_models", "predictive_check", "model_label", "alternative_terms",
-           "DEFAULT_CANDIDATES"]
+           "compare_effect_models", "predictive_check", "misfit_trace", "model_label",
+           "alternative_terms", "DEFAULT_CANDIDATES", "DEFAULT_TRUST_Z", "DEFAULT_LOCAL_Z"]
 
 
 def pointwise_log_likelihood(result, t, counts) -> np.ndarray:
@@ -192,6 +192,11 @@ def compare_motion_models(t, counts, step, seed, candidates=((), (3,)), n_draws=
 # Encoder, clock and motion effects: held-out comparison of point fits
 # ---------------------------------------------------------------------------------------------
 
+#: Predictive check: below this z (whole log) the estimates are untrusted.
+DEFAULT_TRUST_Z = -4.0
+#: Localized check (:func:`misfit_trace`): below this z in any one bin they are untrusted.
+DEFAULT_LOCAL_Z = -5.0
+
 #: Default candidates of :func:`compare_effect_models`: ``(harmonics, effects)`` pairs.
 DEFAULT_CANDIDATES = (((), ()), ((2,), ()), ((3,), ()), ((), ("hysteresis",)),
                       ((), ("drift",)), ((), ("count_jump",)), ((), ("time_jitter",)))
@@ -278,6 +283,102 @@ def _si_params(m):
     return out
 
 
+_STROKE_PART = ("lower third", "middle third", "upper third")
+_TENTHS = ("1st", "2nd", "3rd", "4th", "5th", "6th", "7th", "8th", "9th", "10th")
+
+
+def _trace_covariates(m, t, prev):
+    """``(covariate, bin per sample, description per bin)`` for :func:`misfit_trace`.
+
+    Every covariate is known before the sample is read (the time, the fitted motion, the
+    previous reading): binning by the reading itself would select the surprising outcomes and
+    bias every bin low."""
+    u = (t - t[0]) / max(t[-1] - t[0], np.finfo(float).tiny)
+    tenth = np.minimum((u * 10).astype(np.int64), 9)
+    time_words = [f"in the {_TENTHS[k]} tenth of the log ({t[0] + (t[-1] - t[0]) * k / 10:.3g} "
+                  f"to {t[0] + (t[-1] - t[0]) * (k + 1) / 10:.3g} s)" for k in range(10)]
+    drift_col = lrde_effects._columns(m["harmonics"], m["effects"]).get("drift")
+    motion, speed = lrde_effects._motion_and_speed(np.atleast_2d(m["x"]), t, m["t_ref"],
+                                                   tuple(m["harmonics"]), drift_col)
+    motion, speed = motion[0], speed[0]
+    lo, hi = motion.min(), motion.max()
+    part = np.minimum(((motion - lo) / max(hi - lo, 1e-12) * 3).astype(np.int64), 2)
+    stroke = 3 * (speed < 0) + part
+    stroke_words = [f"while the motion {way} through the {_STROKE_PART[k]} of its stroke"
+                    for way in ("rises", "falls") for k in range(3)]
+    levels, level = np.unique(prev, return_inverse=True)
+    level_words = [f"where the reading leaves or holds count {int(c)} (its edges)"
+                   for c in levels]
+    return [("time in the log", tenth, time_words),
+            ("position and direction of the motion", stroke, stroke_words),
+            ("count before the sample", level, level_words)]
+
+
+def misfit_trace(m, t, counts, min_var=1.0, floor=-50.0) -> dict:
+    """Where the readings are explained worse than the fit itself expects: a localized check.
+
+    Each reading's log-probability given the one before, ``l_j``, has under the fit an exact
+    mean ``E_j`` and variance ``V_j`` over the readings it could have been (previous count and
+    its two neighbours: no reading moves further in one sample at the rates this model is
+    for). ``l_j - E_j`` is then a martingale difference, so over any set of samples
+    ``z = sum(l_j - E_j) / sqrt(sum V_j)`` has mean 0 and variance 1 when the fit is right,
+    whichever samples are summed, as long as which are summed is known before each is read.
+    It is summed per bin of three such covariates: time in the log (tenths, and the log up to
+    or from each tenth), position and direction of the fitted motion (thirds of the stroke,
+    rising or falling) and the reading before the sample (transitions out of a count and
+    dwell in it). Bins with ``sum V_j < min_var`` (a handful of uncertain readings) are left
+    out, and log-probabilities are floored at ``floor`` (an impossible reading counts as very
+    unlikely, not as infinitely so). The bin with the lowest ``z`` places the misfit in
+    words: an effect no candidate names still shows where it acts (a part of the log, a part
+    of the stroke, one count's edges).
+
+    ``m`` is a point fit of :func:`compare_effect_models` (``full_fits``); with
+    ``count_jump`` its most probable jump is taken out first. Returns ``covariate``, ``where``,
+    ``z``, ``z_all`` (every sample) and ``by_covariate`` (the worst bin of each covariate).
+    """
+    offsets = 0
+    if "count_jump" in m["effects"]:
+        *_, offsets = lrde_effects.jump_posterior(m["x"], t, counts, m["step"], m["centre"],
+                                                  m["t_ref"], m["harmonics"], m["effects"])
+    c = np.asarray(counts) - offsets
+    prev = np.concatenate((c[:1], c[:-1]))
+
+    def log_p(readings):
+        return np.maximum(lrde_effects.pointwise_log_likelihood(
+            m["x"], t, readings, m["step"], m["centre"], m["t_ref"], m["harmonics"],
+            m["effects"], prev_counts=prev)[0], floor)
+
+    alternatives = np.stack([log_p(prev + d) for d in (-1, 0, 1)])
+    prob = np.exp(alternatives)
+    mean = (prob * alternatives).sum(axis=0)
+    var = np.maximum((prob * alternatives ** 2).sum(axis=0) - mean ** 2, 0.0)
+    centred = log_p(c) - mean
+    rows = []
+    for name, labels, words in _trace_covariates(m, t, prev):
+        n_bins = len(words)
+        total = np.bincount(labels, weights=centred, minlength=n_bins)
+        spread = np.bincount(labels, weights=var, minlength=n_bins)
+        if name == "time in the log":
+            # A change that lasts (a missed count, a slipped part) shows best as the log
+            # from some tenth on, or up to it: those sets join the tenths.
+            edges = t[0] + (t[-1] - t[0]) * np.arange(1, 10) / 10
+            total = np.concatenate((total, np.cumsum(total)[:9],
+                                    np.cumsum(total[::-1])[:9][::-1]))
+            spread = np.concatenate((spread, np.cumsum(spread)[:9],
+                                     np.cumsum(spread[::-1])[:9][::-1]))
+            words = (list(words) + [f"from the start of the log to {e:.3g} s" for e in edges]
+                     + [f"from {e:.3g} s to the end of the log" for e in edges])
+        ok = spread >= min_var
+        if not ok.any():
+            continue
+        z = np.where(ok, total / np.sqrt(np.where(ok, spread, 1.0)), np.inf)
+        k = int(np.argmin(z))
+        rows.append({"covariate": name, "where": words[k], "z": float(z[k])})
+    rows.sort(key=lambda r: r["z"])
+    z_all = float(centred.sum() / np.sqrt(var.sum())) if var.sum() > 0 else 0.0
+    return {**(rows[0] if rows else {}), "z_all": z_all, "by_covariate": rows}
+
+
 def predictive_check(m, t, counts, rng, n_sim=20) -> dict:
     """Log-likelihood of the readings at a point fit against its distribution under the model.
 
@@ -315,8 +416,9 @@ def _fold_fits(t, counts, prev, step, folds, harmonics, effects, base_fits, init
 
 
 def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, min_z=2.0,
-                          f_hz=None, n_sim=20, trust_z=-4.0, pairs=True, sigma_range=None,
-                          sigma_prior="uniform", min_gain=1.0) -> dict:
+                          f_hz=None, n_sim=20, trust_z=DEFAULT_TRUST_Z, pairs=True,
+                          sigma_range=None, sigma_prior="uniform", min_gain=1.0,
+                          local_z=DEFAULT_LOCAL_Z) -> dict:
     """Held-out comparison of motion, encoder and clock effects by point fits (two folds).
 
     Each candidate ``(harmonics, effects)`` is fitted (:func:`enclab.lrde.fit.map_fit`) on the
@@ -361,7 +463,10 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
     full-log point fit against the distribution of the same score on ``n_sim`` readings
     simulated from that fit. ``z < trust_z`` means even the best candidate explains the
     readings worse than it explains its own simulations: the estimates are flagged
-    untrustworthy.
+    untrustworthy. The localized check (:func:`misfit_trace`) asks the same of every tenth of
+    the log, every part of the stroke and every count left or held; a part scoring below ``local_z``
+    is a misfit the chosen model leaves (an effect outside the candidates, absorbed by the
+    nearest ones): the estimates are flagged, and the trace says where it acts.
 
     Returns
     -------
@@ -507,7 +612,10 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
             indistinguishable.append(m["label"])
     chosen_fit = full_fit(best["label"], tuple(best["harmonics"]), tuple(best["effects"]))
     check = predictive_check(chosen_fit, t, counts, rng, n_sim=n_sim)
-    check |= {"trusted": bool(check["z"] >= trust_z), "threshold_z": trust_z}
+    trace = misfit_trace(chosen_fit, t, counts)
+    localized = bool(trace.get("z", 0.0) < local_z)
+    check |= {"trusted": bool(check["z"] >= trust_z and not localized), "threshold_z": trust_z,
+              "localized": localized, "local_z": local_z, "trace": trace}
     chosen_h, chosen_e = tuple(best["harmonics"]), tuple(best["effects"])
     if best["label"] != "sinusoid":
         full_fit(best["label"], chosen_h, chosen_e)
@@ -529,5 +637,8 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
                      "nat or more in all are not ruled out; "
                      f"estimates are untrusted when the chosen model's log-likelihood lies "
                      f"more than {-trust_z:g} standard deviations below that of its own "
-                     "simulated readings"),
+                     "simulated readings, or when on one tenth of the log, one part of the "
+                     "stroke or one count left or held the readings' log-probability lies "
+                     "more than "
+                     f"{-local_z:g} standard deviations below what the fit expects"),
             "full_fits": full}

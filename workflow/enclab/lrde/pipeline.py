@@ -24,6 +24,7 @@ motion models compared on held-out halves, default ``[[], [2], [3]]``; ``[]`` tu
 comparison off) and ``effects`` (encoder and clock effects compared with them, default
 all of :data:`enclab.lrde.effects.EFFECTS`), ``effect_pairs`` (also try the winner plus each
 other passing term, default True), ``trust_z`` (threshold of the predictive check, default -4),
+``local_z`` (threshold of the localized check, default -5),
 see :func:`enclab.lrde.compare.compare_effect_models`.
 
 The paper's sinusoid is fitted first (``before``); when the comparison chooses a model with
@@ -55,7 +56,8 @@ _log = logging.getLogger(__name__)
 
 _KNOWN_SETTINGS = {"channel", "requantize", "use_truth", "rest_position", "f_hz", "n_ensembles",
                    "n_walkers", "n_steps", "max_steps", "n_burn", "ppc_draws", "sigma_range_steps",
-                   "sigma_prior", "motion_models", "effects", "effect_pairs", "trust_z"}
+                   "sigma_prior", "motion_models", "effects", "effect_pairs", "trust_z",
+                   "local_z"}
 
 
 def _angle(df: pd.DataFrame, channel: dict) -> np.ndarray:
@@ -87,7 +89,8 @@ def _compare_effects(t, counts, step, seed, settings) -> tuple:
         comparison = compare.compare_effect_models(
             t, counts, step, seed, candidates=candidates, f_hz=settings.get("f_hz"),
             pairs=bool(settings.get("effect_pairs", True)),
-            trust_z=float(settings.get("trust_z", -4.0)),
+            trust_z=float(settings.get("trust_z", compare.DEFAULT_TRUST_Z)),
+            local_z=float(settings.get("local_z", compare.DEFAULT_LOCAL_Z)),
             sigma_range=settings.get("sigma_range_steps"),
             sigma_prior=settings.get("sigma_prior", "uniform"))
     except ValueError as err:

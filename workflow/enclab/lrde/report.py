@@ -329,9 +329,18 @@ def trust_block(fit, model_block: dict) -> dict:
     reasons = []
     check = model_block.get("check") or {}
     if check and not check.get("trusted", True):
-        reasons.append(f"no candidate model explains the readings: the chosen model "
-                       f"({model_block.get('chosen')}) scores {check['z']:.1f} standard "
-                       "deviations below its own simulated readings")
+        trace = check.get("trace") or {}
+        where = (f"; the misfit is worst {trace['where']} (z = {trace['z']:.1f})"
+                 if trace.get("where") else "")
+        if check["z"] < check.get("threshold_z", -np.inf):
+            reasons.append(f"no candidate model explains the readings: the chosen model "
+                           f"({model_block.get('chosen')}) scores {check['z']:.1f} standard "
+                           f"deviations below its own simulated readings{where}")
+        else:
+            reasons.append(f"the chosen model ({model_block.get('chosen')}) leaves a misfit "
+                           f"{trace.get('where')}: there the readings score {trace['z']:.1f} "
+                           "standard deviations below what it expects, an effect none of the "
+                           "candidates describes (its name may be a stand-in)")
     if not fit.converged:
         reasons.append("the sampler did not converge (R-hat > 1.01 or ESS < 1000)")
     ref = model_block.get("reference") or {}
@@ -460,7 +469,10 @@ def _effect_lines(block: dict) -> list[str]:
         lines.append(f"Note: {m['note']}.")
     else:
         sig = "; ".join(f"{k}: {v}" for k, v in (m.get("signature") or {}).items())
-        lines.append(f"Result: **{m['chosen']}**" + (f" ({sig})" if sig else "") + ".")
+        lines.append(f"Result: **{m['chosen']}**" + (f" ({sig})" if sig else "") + (
+            ": the best of the candidates, but it leaves a misfit (localized check below), "
+            "so the name may stand in for an effect outside the catalogue."
+            if (m.get("check") or {}).get("localized") else "."))
         for name, q in (m.get("params") or {}).items():
             if isinstance(q, dict) and "median" in q:
                 lines.append(f"- {name}: {q['median']:.4g} (90 %: {q['q05']:.4g} .. "
@@ -471,9 +483,18 @@ def _effect_lines(block: dict) -> list[str]:
     lines += _reference_lines(m.get("reference"))
     check = m.get("check") or {}
     if check:
+        passed = check["z"] >= check.get("threshold_z", -np.inf)
         lines += ["", f"Predictive check: the chosen model's log-likelihood is "
                   f"{check['z']:.1f} standard deviations from that of its own simulated readings "
-                  f"-> {'passed' if check['trusted'] else 'FAILED: estimates untrusted'}."]
+                  f"-> {'passed' if passed else 'FAILED: estimates untrusted'}."]
+        trace = check.get("trace") or {}
+        if trace.get("where"):
+            worst = "; ".join(f"{r['covariate']}: {r['where']} ({r['z']:.1f})"
+                              for r in trace.get("by_covariate", []))
+            lines.append(f"Localized check (worst part per covariate, z): {worst} -> "
+                         + ("FAILED: the misfit acts "
+                            f"{trace['where']}, where no candidate explains the readings."
+                            if check.get("localized") else "passed."))
     untrusted = {k: v["reason"] for k, v in (block.get("trust") or {}).items()
                  if not v["trusted"] and block.get(k) is not None}
     for k, reason in untrusted.items():
