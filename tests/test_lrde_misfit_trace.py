@@ -12,10 +12,9 @@ F_HZ, A12, A_EQ, PHASE = 20.3, 3.7 * STEP, 0.55 * STEP, 0.4
 def _truth(noise_frac, hysteresis=0.0):
     """A point fit holding the simulator's own parameters."""
     x = [A12 / STEP, A_EQ / STEP - 0.5, F_HZ, PHASE, np.log10(noise_frac)]
-    fx = {"x": np.array(x + ([hysteresis / STEP] if hysteresis else [])), "step": STEP,
-          "centre": 0.0, "t_ref": 0.0, "harmonics": (),
-          "effects": ("hysteresis",) if hysteresis else ()}
-    return fx
+    return {"x": np.array(x + ([hysteresis / STEP] if hysteresis else [])), "step": STEP,
+            "centre": 0.0, "t_ref": 0.0, "harmonics": (),
+            "effects": ("hysteresis",) if hysteresis else ()}
 
 
 def _readings(rng, n_cycles, noise_frac, hysteresis=0.0):
@@ -104,6 +103,9 @@ def test_the_report_flags_a_misfit_no_candidate_describes():
     block = report.effect_model_block(out)
     reason = report.trust_block(_Fit(), block)["A12"]["reason"]
     assert "leaves a misfit" in reason and check["trace"]["where"] in reason
+    text = "\n".join(report._effect_lines({"model": block}))
+    assert "may stand in for an effect outside the catalogue" in text
+    assert f"FAILED: the misfit acts {check['trace']['where']}" in text
 
 
 class _Fit:

@@ -333,7 +333,8 @@ def misfit_trace(m, t, counts, min_var=1.0, floor=-50.0) -> dict:
     of the stroke, one count's edges).
 
     ``m`` is a point fit of :func:`compare_effect_models` (``full_fits``); with
-    ``count_jump`` its most probable jump is taken out first. Returns ``covariate``, ``where``,
+    ``count_jump`` its most probable jump is taken out first (counts are then named in the
+    frame of the reference segment). Returns ``covariate``, ``where``,
     ``z``, ``z_all`` (every sample) and ``by_covariate`` (the worst bin of each covariate).
     """
     offsets = 0
@@ -464,9 +465,9 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
     simulated from that fit. ``z < trust_z`` means even the best candidate explains the
     readings worse than it explains its own simulations: the estimates are flagged
     untrustworthy. The localized check (:func:`misfit_trace`) asks the same of every tenth of
-    the log, every part of the stroke and every count left or held; a part scoring below ``local_z``
-    is a misfit the chosen model leaves (an effect outside the candidates, absorbed by the
-    nearest ones): the estimates are flagged, and the trace says where it acts.
+    the log, every part of the stroke and every count left or held; a part scoring below
+    ``local_z`` is a misfit the chosen model leaves (an effect outside the candidates, absorbed
+    by the nearest ones): the estimates are flagged, and the trace says where it acts.
 
     Returns
     -------
@@ -639,6 +640,5 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
                      f"more than {-trust_z:g} standard deviations below that of its own "
                      "simulated readings, or when on one tenth of the log, one part of the "
                      "stroke or one count left or held the readings' log-probability lies "
-                     "more than "
-                     f"{-local_z:g} standard deviations below what the fit expects"),
+                     f"more than {-local_z:g} standard deviations below what the fit expects"),
             "full_fits": full}

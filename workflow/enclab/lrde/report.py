@@ -461,9 +461,12 @@ def _effect_lines(block: dict) -> list[str]:
         bic = f"{r['delta_bic']:.1f}" if r.get("delta_bic") is not None else "-"
         lines.append(f"| {r['label']} | {r['elpd_per_cycle']:.3f} | {gain} | {z} | {bic} |")
     lines += ["", f"Rule: {m['rule']}.", ""]
+    localized = (m.get("check") or {}).get("localized")
     if m["chosen"] == "sinusoid" and not m.get("not_ruled_out"):
         lines.append("Result: no effect predicts the held-out readings better than the "
-                     "sinusoid; the paper's model stands.")
+                     "sinusoid; " + ("yet it leaves a misfit (localized check below) that "
+                                     "no candidate describes." if localized
+                                     else "the paper's model stands."))
     elif m["chosen"] == "sinusoid":
         lines.append("Result: no effect clears the rule; the paper's model is kept.")
         lines.append(f"Note: {m['note']}.")
@@ -472,7 +475,7 @@ def _effect_lines(block: dict) -> list[str]:
         lines.append(f"Result: **{m['chosen']}**" + (f" ({sig})" if sig else "") + (
             ": the best of the candidates, but it leaves a misfit (localized check below), "
             "so the name may stand in for an effect outside the catalogue."
-            if (m.get("check") or {}).get("localized") else "."))
+            if localized else "."))
         for name, q in (m.get("params") or {}).items():
             if isinstance(q, dict) and "median" in q:
                 lines.append(f"- {name}: {q['median']:.4g} (90 %: {q['q05']:.4g} .. "
