@@ -321,7 +321,7 @@ def pool_summaries(earlier: pd.DataFrame, draws: pd.DataFrame) -> pd.DataFrame:
                 row[name] = k3 / n3 if n3 else np.nan
         if key[1] != "all":
             confused = {c for r in (old, new) if isinstance(r.get("confused_with"), str)
-                        for c in r["confused_with"].split("|")}
+                        for c in r["confused_with"].split("|") if c}
             row["confused_with"] = "|".join(sorted(confused))
         row["median_wall_s"] = np.nan
         rows.append(row)
