@@ -373,8 +373,10 @@ def main(argv=None):
         summary = stamp(summarise(draws))
         if args.pool_with:
             earlier = pd.read_csv(args.pool_with)
-            summary = pd.concat([earlier, summary, stamp(pool_summaries(earlier, draws))],
-                                ignore_index=True)
+            pooled = stamp(pool_summaries(earlier, draws))
+            # Its own provenance, so that the page tells the pooled rows from this run's.
+            pooled["command"] += f"  # pooled: {args.pool_with} + these draws"
+            summary = pd.concat([earlier, summary, pooled], ignore_index=True)
         summary.to_csv(out / "lrde_effects_summary.csv", index=False)
         with pd.option_context("display.width", 250, "display.max_columns", 40):
             print(summary)
