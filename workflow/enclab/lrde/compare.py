@@ -353,7 +353,11 @@ def misfit_trace(m, t, counts, min_var=1.0, floor=-50.0) -> dict:
     prob = np.exp(alternatives)
     mean = (prob * alternatives).sum(axis=0)
     var = np.maximum((prob * alternatives ** 2).sum(axis=0) - mean ** 2, 0.0)
-    centred = log_p(c) - mean
+    # The reading is one of the alternatives unless it moved by more than a count.
+    moved = c - prev
+    observed = (np.take_along_axis(alternatives, (moved + 1)[None, :], axis=0)[0]
+                if np.all(np.abs(moved) <= 1) else log_p(c))
+    centred = observed - mean
     rows = []
     for name, labels, words in _trace_covariates(m, t, prev):
         n_bins = len(words)
