@@ -113,3 +113,72 @@ class _Fit:
     converged = True
     summary = {"A12": 1.0, "E_b": 0.0, "a_eq": 0.0, "f_hz": 20.0, "offset_a": None,
                "bias_b": None}
+
+
+@pytest.mark.parametrize("hysteresis", [0.0, STEP / 8])
+def test_dwell_ranks_at_the_truth_are_calibrated(hysteresis):
+    # The mid-rank of each dwell's end has mean 1/2 and the stated variance under the model:
+    # one fixed group's standardised sum and the successive-dwell sum are N(0, 1) over 60 logs
+    # (3 standard errors of a mean and of an sd, as above).
+    rng = np.random.default_rng(11)
+    n = 60
+    m = _truth(0.05, hysteresis)
+    z_group, z_lag = [], []
+    for _ in range(n):
+        t, c = _readings(rng, 6, 0.05, hysteresis)
+        prev = np.concatenate((c[:1], c[:-1]))
+
+        def log_p(readings, before):
+            return np.maximum(effects.pointwise_log_likelihood(
+                m["x"], t, readings, STEP, 0.0, 0.0, m["harmonics"], m["effects"],
+                prev_counts=before)[0], -50.0)
+
+        s, var, key = compare.dwell_ranks(log_p, c)
+        assert np.all((s >= -0.5) & (s <= 0.5)) and np.all((var >= 0) & (var <= 1 / 12))
+        group = key == 3 * 2 + 1  # count 2 entered from below: crossed by every stroke
+        z_group.append(s[group].sum() / np.sqrt(var[group].sum()))
+        num = den = 0.0
+        for k in np.unique(key):
+            ds = np.flatnonzero(key == k)
+            num += np.sum(s[ds[:-1]] * s[ds[1:]])
+            den += np.sum(s[ds[:-1]] ** 2 * var[ds[1:]])
+        z_lag.append(num / np.sqrt(den))
+    for z in (np.array(z_group), np.array(z_lag)):
+        assert abs(z.mean()) < 3 / np.sqrt(n)
+        assert abs(z.std(ddof=1) - 1) < 3 / np.sqrt(2 * (n - 1))
+
+
+def test_dwell_rank_moments_are_exact():
+    # The mid-rank's mean and variance, against the end-time distribution written out: a
+    # chain that leaves count 0 with probability 0.3 per sample, with a cut at 4 samples.
+    q = np.array([1.0, 0.7, 0.7, 0.7, 0.7])
+
+    def log_p(readings, before):
+        return np.log(q)
+
+    p = np.array([0.3, 0.7 * 0.3, 0.49 * 0.3, 0.343 * 0.3, 0.7 ** 4])
+    s_by_end = []
+    for end in range(1, 6):
+        c = np.zeros(5, dtype=np.int64)
+        c[end:] = 1
+        s, var, _ = compare.dwell_ranks(log_p, c)
+        s_by_end.append(s[0])
+    s_by_end = np.array(s_by_end)
+    assert abs(np.sum(p * s_by_end)) < 1e-12
+    np.testing.assert_allclose(np.sum(p * s_by_end ** 2), var[0], rtol=1e-12)
+    np.testing.assert_allclose(var[0], (1 - np.sum(p ** 3)) / 12, rtol=1e-12)
+
+
+def test_a_drifting_bias_absorbed_by_the_noise_is_flagged_by_the_dwell_timing():
+    # The motion's bias moves 0.3 step over 20 cycles, a term no candidate has. The fitted
+    # position noise takes it up (it passes every bin of the log-probability sums), but the
+    # dwells end early at one end of the log and late at the other, successively.
+    rng = np.random.default_rng(21)
+    t = np.arange(int(20 * 2000.0 / F_HZ)) / 2000.0
+    x = (0.5 * A12 * np.sin(2 * np.pi * F_HZ * t + PHASE) + A_EQ) / STEP
+    x = x + 0.3 * (t / t[-1] - 0.5) + rng.normal(0, 0.005, t.size)
+    comp = compare.compare_effect_models(t, np.floor(x).astype(np.int64), STEP, seed=3)
+    trace = comp["check"]["trace"]
+    assert trace["covariate"] == "dwell timing from cycle to cycle"
+    assert trace["z"] < compare.DEFAULT_LOCAL_Z
+    assert comp["check"]["localized"] and not comp["check"]["trusted"]

@@ -39,8 +39,9 @@ from enclab.lrde import fit as lrde_fit
 from enclab.lrde.effects import model_label
 
 __all__ = ["pointwise_log_likelihood", "heldout_elpd", "compare_motion_models",
-           "compare_effect_models", "predictive_check", "misfit_trace", "model_label",
-           "alternative_terms", "DEFAULT_CANDIDATES", "DEFAULT_TRUST_Z", "DEFAULT_LOCAL_Z"]
+           "compare_effect_models", "predictive_check", "misfit_trace", "dwell_ranks",
+           "model_label", "alternative_terms", "DEFAULT_CANDIDATES", "DEFAULT_TRUST_Z",
+           "DEFAULT_LOCAL_Z"]
 
 
 def pointwise_log_likelihood(result, t, counts) -> np.ndarray:
@@ -314,7 +315,94 @@ def _trace_covariates(m, t, prev):
             ("count before the sample", level, level_words)]
 
 
-def misfit_trace(m, t, counts, min_var=1.0, floor=-50.0) -> dict:
+def dwell_ranks(log_p, c):
+    """Mid-ranks of the dwells' ends under a fit: ``(s, var, key)`` per dwell.
+
+    A dwell is a run of one reading. Under the fit the readings are a Markov chain, so a
+    dwell that starts at sample ``a`` in count ``k`` ends at sample ``j > a`` with probability
+    ``p_j = S_{j-1} (1 - q_j)``, where ``q_j`` is the probability of reading ``k`` again after
+    ``k`` and ``S`` the running product of the ``q``. The mid-rank ``u = F(b - 1) + p_b / 2``
+    of the observed end ``b`` has mean 1/2 and variance ``(1 - sum p_j^3) / 12`` exactly (a
+    discrete probability integral transform) given everything before the dwell, so
+    ``s = u - 1/2`` is a martingale difference in dwell order. The last dwell, cut by the end
+    of the log, ends "after the log" (its remaining probability). ``key`` is ``3 k + e``, with
+    ``e`` the side the count was entered from (+1 below, -1 above, 0 at the start).
+    ``log_p(readings, prev)`` is the fit's pointwise log-probability.
+    """
+    n = c.size
+    starts = np.flatnonzero(np.r_[True, c[1:] != c[:-1]])
+    ends = np.r_[starts[1:], n]  # the sample that leaves the dwell; n: the log ends first
+    cum = {}
+    for k in np.unique(c):
+        same = np.full(n, k)
+        cum[k] = np.concatenate(([0.0], np.cumsum(np.minimum(log_p(same, same), 0.0))))
+    s = np.empty(starts.size)
+    var = np.empty(starts.size)
+    far = 30.0  # survival below e^-30: the rest of the distribution is negligible
+    for d, (a, b) in enumerate(zip(starts, ends)):
+        log_survival = cum[c[a]][a + 1:] - cum[c[a]][a + 1]  # samples a, a+1, ...
+        stop = int(np.searchsorted(-log_survival, far))      # it never increases
+        S = np.exp(log_survival[:stop + 1])
+        p = np.append(-np.diff(S), S[-1])  # ends at a+1 .. a+stop, then the rest
+        i = b - (a + 1)
+        u = 1.0 - S[i] + 0.5 * p[i] if i < p.size - 1 else 1.0 - 0.5 * p[-1]
+        s[d] = u - 0.5
+        var[d] = max(1.0 - np.sum(p ** 3), 0.0) / 12.0
+    entered = np.r_[0, np.sign(c[starts[1:]] - c[starts[1:] - 1])]
+    return s, var, c[starts] * 3 + entered
+
+
+_SUCCESSIVE_DWELLS = "dwell timing from cycle to cycle"
+
+
+def _dwell_timing_rows(log_p, c, min_var=0.25) -> list:
+    """Rows of :func:`misfit_trace` from the timing of the dwells (:func:`dwell_ranks`).
+
+    Two sums of the dwells' centred mid-ranks ``s`` are standardised:
+
+    * per count and the side it was entered from, ``sum s / sqrt(sum var)``: those dwells
+      end systematically early or late (an edge off its place, a shape of the motion the fit
+      lacks); groups holding less than ``min_var`` in all (3 fully uncertain dwells hold
+      ``1/4``) are left out;
+    * over successive dwells of one count and entry side, ``sum s_d s_d+1 /
+      sqrt(sum s_d^2 var_d+1)`` (self-normalised): successive dwells end early or late
+      together. Only a deterministic pattern does that: a slow change over the log, or a
+      shape repeated every cycle. A fitted position noise that absorbs such a pattern
+      widens each dwell's spread, but cannot make successive dwells independent.
+
+    Returns rows ``{covariate, where, z}``, low ``z`` bad (the first as ``-|z|``).
+    """
+    s, var, key = dwell_ranks(log_p, c)
+    rows = []
+    worst = None
+    num = den = 0.0
+    for k in np.unique(key):
+        ds = np.flatnonzero(key == k)
+        num += np.sum(s[ds[:-1]] * s[ds[1:]])
+        den += np.sum(s[ds[:-1]] ** 2 * var[ds[1:]])
+        spread = var[ds].sum()
+        if spread < min_var:
+            continue
+        z = s[ds].sum() / np.sqrt(spread)
+        if worst is None or -abs(z) < worst["z"]:
+            level, side = divmod(int(k) + 1, 3)
+            side = ("above", "the start of the log", "below")[side]
+            worst = {"covariate": "dwell length per count",
+                     "where": (f"in the dwells in count {level} entered from {side}, which "
+                               f"end {'later' if z > 0 else 'earlier'} than the fit expects"),
+                     "z": -abs(float(z))}
+    if worst is not None:
+        rows.append(worst)
+    if den > 0:
+        rows.append({"covariate": _SUCCESSIVE_DWELLS,
+                     "where": ("in the dwell timing, where successive dwells of a count end "
+                               "early or late together (a change slower than a cycle, or a "
+                               "shape repeated every cycle, that the fit does not follow)"),
+                     "z": -float(num / np.sqrt(den))})
+    return rows
+
+
+def misfit_trace(m, t, counts, min_var=1.0, floor=-50.0, local_z=DEFAULT_LOCAL_Z) -> dict:
     """Where the readings are explained worse than the fit itself expects: a localized check.
 
     Each reading's log-probability given the one before, ``l_j``, has under the fit an exact
@@ -332,6 +420,14 @@ def misfit_trace(m, t, counts, min_var=1.0, floor=-50.0) -> dict:
     words: an effect no candidate names still shows where it acts (a part of the log, a part
     of the stroke, one count's edges).
 
+    The same is asked of the dwells (:func:`_dwell_timing_rows`): whether one count's dwells
+    end early or late, and whether successive dwells of a count do so together. The second
+    finds what a fitted position noise absorbs: a drift of the bias or of the stroke, or a
+    shape of the motion no candidate has, spreads every sample's surprise thinly enough to
+    pass the bins above, but it repeats from cycle to cycle, and noise does not. That row
+    says how the misfit acts, not where, so it heads the trace only when no row that places
+    the misfit falls below ``local_z``.
+
     ``m`` is a point fit of :func:`compare_effect_models` (``full_fits``); with
     ``count_jump`` its most probable jump is taken out first (counts are then named in the
     frame of the reference segment). Returns ``covariate``, ``where``,
@@ -344,10 +440,10 @@ def misfit_trace(m, t, counts, min_var=1.0, floor=-50.0) -> dict:
     c = np.asarray(counts) - offsets
     prev = np.concatenate((c[:1], c[:-1]))
 
-    def log_p(readings):
+    def log_p(readings, before=prev):
         return np.maximum(lrde_effects.pointwise_log_likelihood(
             m["x"], t, readings, m["step"], m["centre"], m["t_ref"], m["harmonics"],
-            m["effects"], prev_counts=prev)[0], floor)
+            m["effects"], prev_counts=before)[0], floor)
 
     alternatives = np.stack([log_p(prev + d) for d in (-1, 0, 1)])
     prob = np.exp(alternatives)
@@ -379,9 +475,16 @@ def misfit_trace(m, t, counts, min_var=1.0, floor=-50.0) -> dict:
         z = np.where(ok, total / np.sqrt(np.where(ok, spread, 1.0)), np.inf)
         k = int(np.argmin(z))
         rows.append({"covariate": name, "where": words[k], "z": float(z[k])})
+    rows += _dwell_timing_rows(log_p, c)
     rows.sort(key=lambda r: r["z"])
     z_all = float(centred.sum() / np.sqrt(var.sum())) if var.sum() > 0 else 0.0
-    return {**(rows[0] if rows else {}), "z_all": z_all, "by_covariate": rows}
+    worst = rows[0] if rows else {}
+    placing = [r for r in rows if r["covariate"] != _SUCCESSIVE_DWELLS and r["z"] < local_z]
+    if worst.get("covariate") == _SUCCESSIVE_DWELLS and placing:
+        # Successive dwells alike say how the misfit acts, not where: a part of the log, the
+        # stroke or one count that fails too names it better.
+        worst = placing[0]
+    return {**worst, "z_all": z_all, "by_covariate": rows}
 
 
 def predictive_check(m, t, counts, rng, n_sim=20) -> dict:
@@ -617,7 +720,7 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
             indistinguishable.append(m["label"])
     chosen_fit = full_fit(best["label"], tuple(best["harmonics"]), tuple(best["effects"]))
     check = predictive_check(chosen_fit, t, counts, rng, n_sim=n_sim)
-    trace = misfit_trace(chosen_fit, t, counts)
+    trace = misfit_trace(chosen_fit, t, counts, local_z=local_z)
     localized = bool(trace.get("z", 0.0) < local_z)
     check |= {"trusted": bool(check["z"] >= trust_z and not localized), "threshold_z": trust_z,
               "localized": localized, "local_z": local_z, "trace": trace}
