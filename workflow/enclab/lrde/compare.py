@@ -332,17 +332,19 @@ def dwell_ranks(log_p, c):
     n = c.size
     starts = np.flatnonzero(np.r_[True, c[1:] != c[:-1]])
     ends = np.r_[starts[1:], n]  # the sample that leaves the dwell; n: the log ends first
-    cum = {}
+    # Minus the running log-probability of staying in each count: it never decreases, so
+    # where a dwell's survival falls below e^-far (the rest is negligible) is a bisection.
+    lost = {}
     for k in np.unique(c):
         same = np.full(n, k)
-        cum[k] = np.concatenate(([0.0], np.cumsum(np.minimum(log_p(same, same), 0.0))))
+        lost[k] = np.concatenate(([0.0], np.cumsum(-np.minimum(log_p(same, same), 0.0))))
     s = np.empty(starts.size)
     var = np.empty(starts.size)
-    far = 30.0  # survival below e^-30: the rest of the distribution is negligible
+    far = 30.0
     for d, (a, b) in enumerate(zip(starts, ends)):
-        log_survival = cum[c[a]][a + 1:] - cum[c[a]][a + 1]  # samples a, a+1, ...
-        stop = int(np.searchsorted(-log_survival, far))      # it never increases
-        S = np.exp(log_survival[:stop + 1])
+        run = lost[c[a]]
+        stop = int(np.searchsorted(run, run[a + 1] + far)) - (a + 1)
+        S = np.exp(run[a + 1] - run[a + 1:a + 2 + stop])  # survival at samples a, a+1, ...
         p = np.append(-np.diff(S), S[-1])  # ends at a+1 .. a+stop, then the rest
         i = b - (a + 1)
         u = 1.0 - S[i] + 0.5 * p[i] if i < p.size - 1 else 1.0 - 0.5 * p[-1]
