@@ -37,7 +37,9 @@ Usage::
     python workflow/benchmarks/lrde_misfit_trace.py --draws 12 --cycles 20
     python workflow/benchmarks/lrde_misfit_trace.py --draws 4 --cycles 20 --cases edge_error clean
 
-Writes ``<out>/lrde_misfit_trace_draws.csv`` and ``<out>/lrde_misfit_trace.csv``.
+Writes ``<out>/lrde_misfit_trace_draws.csv`` and ``<out>/lrde_misfit_trace.csv``. With
+``--from-draws CSV`` it summarises an earlier run's draws instead (stamped with that run's
+provenance); ``--keep SUMMARY_CSV`` keeps an earlier summary's rows above the new ones.
 """
 from __future__ import annotations
 
@@ -63,6 +65,7 @@ CASES = effects_bench.CASES + OUTSIDE
 # the harmonic, not for one misplaced edge or two missed counts (which other rows place).
 _COUNT = ("count before the sample", "dwell length per count")
 _SLOW = ("time in the log", "dwell timing from cycle to cycle")
+DWELL_ROWS = ("dwell length per count", "dwell timing from cycle to cycle")
 ACTS_ON = {"edge_error": _COUNT,
            "harmonic5": ("position and direction of the motion",
                          "dwell timing from cycle to cycle") + _COUNT,
@@ -155,6 +158,7 @@ def summarise(draws: pd.DataFrame, local_z: float) -> pd.DataFrame:
             row["flagged_when_missed"] = flagged[~named].mean() if (~named).any() else np.nan
         row["trace_covariate_mode"] = (g.loc[flagged, "covariate"].mode().iloc[0]
                                        if flagged.any() else "")
+        row["flagged_headed_by_dwells"] = (flagged & g["covariate"].isin(DWELL_ROWS)).mean()
         rows.append(row)
     return pd.DataFrame(rows)
 
@@ -167,9 +171,24 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=20261203)
     ap.add_argument("--local-z", type=float, default=compare.DEFAULT_LOCAL_Z)
     ap.add_argument("--out", default=str(ROOT / "results" / "benchmarks"))
+    ap.add_argument("--from-draws", default=None, metavar="CSV",
+                    help="summarise an earlier run's per-draw table instead of drawing")
+    ap.add_argument("--keep", default=None, metavar="SUMMARY_CSV",
+                    help="an earlier summary whose rows are kept above the new ones")
     args = ap.parse_args(argv)
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    if args.from_draws:
+        draws = pd.read_csv(args.from_draws)
+        summary = summarise(draws, float(draws["local_z"].iloc[0]) if "local_z" in draws
+                            else args.local_z)
+        if "date" in draws:
+            # The summary is of that run: its date, machine and command.
+            first = draws.iloc[0]
+            summary = stamp(summary.assign(**{k: first[k] for k in ("date", "machine",
+                                                                    "command")}))
+        _write_summary(summary, args.keep, out)
+        return
     rows = []
     for cycles in args.cycles:
         for i in range(args.draws):
@@ -182,7 +201,12 @@ def main(argv=None):
                       flush=True)
                 stamp(pd.DataFrame(rows)).to_csv(out / "lrde_misfit_trace_draws.csv",
                                                  index=False)
-    summary = stamp(summarise(pd.DataFrame(rows), args.local_z))
+    _write_summary(stamp(summarise(pd.DataFrame(rows), args.local_z)), args.keep, out)
+
+
+def _write_summary(summary, keep, out):
+    if keep:
+        summary = pd.concat([pd.read_csv(keep), summary], ignore_index=True)
     summary.to_csv(out / "lrde_misfit_trace.csv", index=False)
     with pd.option_context("display.width", 250, "display.max_columns", 30):
         print(summary)
