@@ -20,6 +20,7 @@ def main(smk):
     atomic.save_figure(figures["corner"], smk.output.corner)
     atomic.save_figure(figures["dwell_ppc"], smk.output.dwell)
     atomic.save_figure(figures["bias_cycles"], smk.output.bias_cycles)
+    atomic.save_figure(figures["misfit"], smk.output.misfit)
     atomic.write_text(report_md, smk.output.report)
     atomic.write_json(block, smk.output.block)
 

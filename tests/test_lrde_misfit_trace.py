@@ -3,7 +3,7 @@ candidate describes on the covariate where they act."""
 import numpy as np
 import pytest
 
-from enclab.lrde import compare, effects, report, simulate
+from enclab.lrde import compare, effects, plots, report, simulate
 
 STEP = simulate.ROS_DRILL_STEP
 F_HZ, A12, A_EQ, PHASE = 20.3, 3.7 * STEP, 0.55 * STEP, 0.4
@@ -133,7 +133,7 @@ def test_dwell_ranks_at_the_truth_are_calibrated(hysteresis):
                 m["x"], t, readings, STEP, 0.0, 0.0, m["harmonics"], m["effects"],
                 prev_counts=before)[0], -50.0)
 
-        s, var, key = compare.dwell_ranks(log_p, c)
+        s, var, key, _ = compare.dwell_ranks(log_p, c)
         assert np.all((s >= -0.5) & (s <= 0.5)) and np.all((var >= 0) & (var <= 1 / 12))
         group = key == 3 * 2 + 1  # count 2 entered from below: crossed by every stroke
         z_group.append(s[group].sum() / np.sqrt(var[group].sum()))
@@ -161,7 +161,7 @@ def test_dwell_rank_moments_are_exact():
     for end in range(1, 6):
         c = np.zeros(5, dtype=np.int64)
         c[end:] = 1
-        s, var, _ = compare.dwell_ranks(log_p, c)
+        s, var, _, _ = compare.dwell_ranks(log_p, c)
         s_by_end.append(s[0])
     s_by_end = np.array(s_by_end)
     assert abs(np.sum(p * s_by_end)) < 1e-12
@@ -182,3 +182,19 @@ def test_a_drifting_bias_absorbed_by_the_noise_is_flagged_by_the_dwell_timing():
     assert trace["covariate"] == "dwell timing from cycle to cycle"
     assert trace["z"] < compare.DEFAULT_LOCAL_Z
     assert comp["check"]["localized"] and not comp["check"]["trusted"]
+    # The figure shows what the trace says: the successive-dwell z in the dwell panel's
+    # title, a bar per tenth of the log, a line per kind of dwell.
+    detail = comp["trace_detail"]
+    assert detail["lag_z"] == pytest.approx(-trace["z"])
+    fig = plots.misfit_plot(detail)
+    ax_time, ax_parts, ax_dwell = fig.axes
+    assert len(ax_time.patches) == 10
+    assert f"z = {detail['lag_z']:.1f}" in ax_dwell.get_title()
+    kinds = np.unique(detail["dwells"]["key"])
+    assert len(ax_dwell.get_lines()) == 1 + sum(
+        (detail["dwells"]["key"] == k).sum() >= 2 for k in kinds)
+
+
+def test_misfit_plot_without_a_comparison_says_so():
+    fig = plots.misfit_plot(None)
+    assert "no model comparison ran" in fig.axes[0].texts[0].get_text()

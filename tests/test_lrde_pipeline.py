@@ -41,7 +41,7 @@ def test_analyse_lrde_log_block_matches_design_contract():
     # The truth channel identifies the offset (to the truth's 0.01-step rounding).
     assert block["offset_a"]["median"] == pytest.approx(p["offset_a"], abs=0.02 * STEP)
     json.dumps(block)  # JSON-serialisable
-    assert set(figures) == {"corner", "dwell_ppc", "bias_cycles"}
+    assert set(figures) == {"corner", "dwell_ppc", "bias_cycles", "misfit"}
     assert all(isinstance(f, Figure) for f in figures.values())
     assert "stroke A12" in md and "Sampler diagnostics" in md
     # The held-out comparison of motion, encoder and clock effects ran (a clean sinusoid:

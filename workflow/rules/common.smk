@@ -254,6 +254,7 @@ REPORT_FIGURES = {
     "lrde_dwell": ("results/{log_id}/lrde/dwell_ppc.png", "lrde_dwell.rst", "Paper 002", "{log_id}"),
     "lrde_bias_cycles": ("results/{log_id}/lrde/bias_cycles.png", "lrde_bias_cycles.rst", "Paper 002",
                          "{log_id}"),
+    "lrde_misfit": ("results/{log_id}/lrde/misfit.png", "lrde_misfit.rst", "Paper 002", "{log_id}"),
     "residual_diagnostics": ("results/{log_id}/residuals/{channel}/diagnostics.png",
                              "residual_diagnostics.rst", "Residuals", "{log_id}"),
     "residual_before_after": ("results/{log_id}/residuals/{channel}/before_after.png",
@@ -287,7 +288,7 @@ def report_figures():
                     for name, channel in RIG_CHANNELS],
     }
     for kind, same in (("log_comparison", "log_errors"), ("lrde_dwell", "lrde_corner"),
-                       ("lrde_bias_cycles", "lrde_corner"),
+                       ("lrde_bias_cycles", "lrde_corner"), ("lrde_misfit", "lrde_corner"),
                        ("residual_before_after", "residual_diagnostics"),
                        ("residual_covariates", "residual_diagnostics"), ("fig7", "fig6"),
                        ("rig_compliance", "rig_map"), ("rig_heldout", "rig_map"), ("rig_remains", "rig_map")):

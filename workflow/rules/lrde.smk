@@ -15,6 +15,7 @@ rule lrde_fit:
         corner="results/{log_id}/lrde/corner.png",
         dwell="results/{log_id}/lrde/dwell_ppc.png",
         bias_cycles="results/{log_id}/lrde/bias_cycles.png",
+        misfit="results/{log_id}/lrde/misfit.png",
     params:
         settings=lambda wc: lrde_settings(wc),
         code=CODE_DIGEST,

@@ -289,7 +289,8 @@ _TENTHS = ("1st", "2nd", "3rd", "4th", "5th", "6th", "7th", "8th", "9th", "10th"
 
 
 def _trace_covariates(m, t, prev):
-    """``(covariate, bin per sample, description per bin)`` for :func:`misfit_trace`.
+    """``(covariate, bin per sample, description per bin, short label per bin)`` for
+    :func:`misfit_trace`.
 
     Every covariate is known before the sample is read (the time, the fitted motion, the
     previous reading): binning by the reading itself would select the surprising outcomes and
@@ -310,13 +311,15 @@ def _trace_covariates(m, t, prev):
     levels, level = np.unique(prev, return_inverse=True)
     level_words = [f"where the reading leaves or holds count {int(c)} (its edges)"
                    for c in levels]
-    return [("time in the log", tenth, time_words),
-            ("position and direction of the motion", stroke, stroke_words),
-            ("count before the sample", level, level_words)]
+    time_short = [f"{t[0] + (t[-1] - t[0]) * (k + 0.5) / 10:.3g}" for k in range(10)]
+    stroke_short = [f"{way} {part}" for way in ("up", "down") for part in ("low", "mid", "high")]
+    return [("time in the log", tenth, time_words, time_short),
+            ("position and direction of the motion", stroke, stroke_words, stroke_short),
+            ("count before the sample", level, level_words, [str(int(c)) for c in levels])]
 
 
 def dwell_ranks(log_p, c):
-    """Mid-ranks of the dwells' ends under a fit: ``(s, var, key)`` per dwell.
+    """Mid-ranks of the dwells' ends under a fit: ``(s, var, key, start)`` per dwell.
 
     A dwell is a run of one reading. Under the fit the readings are a Markov chain, so a
     dwell that starts at sample ``a`` in count ``k`` ends at sample ``j > a`` with probability
@@ -326,7 +329,8 @@ def dwell_ranks(log_p, c):
     discrete probability integral transform) given everything before the dwell, so
     ``s = u - 1/2`` is a martingale difference in dwell order. The last dwell, cut by the end
     of the log, ends "after the log" (its remaining probability). ``key`` is ``3 k + e``, with
-    ``e`` the side the count was entered from (+1 below, -1 above, 0 at the start).
+    ``e`` the side the count was entered from (+1 below, -1 above, 0 at the start), and
+    ``start`` the dwell's first sample.
     ``log_p(readings, prev)`` is the fit's pointwise log-probability.
     """
     n = c.size
@@ -351,13 +355,13 @@ def dwell_ranks(log_p, c):
         s[d] = u - 0.5
         var[d] = max(1.0 - np.sum(p ** 3), 0.0) / 12.0
     entered = np.r_[0, np.sign(c[starts[1:]] - c[starts[1:] - 1])]
-    return s, var, c[starts] * 3 + entered
+    return s, var, c[starts] * 3 + entered, starts
 
 
 _SUCCESSIVE_DWELLS = "dwell timing from cycle to cycle"
 
 
-def _dwell_timing_rows(log_p, c, min_var=0.25) -> list:
+def _dwell_timing_rows(s, var, key, min_var=0.25) -> tuple:
     """Rows of :func:`misfit_trace` from the timing of the dwells (:func:`dwell_ranks`).
 
     Two sums of the dwells' centred mid-ranks ``s`` are standardised:
@@ -372,9 +376,9 @@ def _dwell_timing_rows(log_p, c, min_var=0.25) -> list:
       shape repeated every cycle. A fitted position noise that absorbs such a pattern
       widens each dwell's spread, but cannot make successive dwells independent.
 
-    Returns rows ``{covariate, where, z}``, low ``z`` bad (the first as ``-|z|``).
+    Returns rows ``{covariate, where, z}``, low ``z`` bad (the first as ``-|z|``), and the
+    successive-dwell ``z`` (None without two dwells of one kind).
     """
-    s, var, key = dwell_ranks(log_p, c)
     rows = []
     worst = None
     num = den = 0.0
@@ -395,13 +399,14 @@ def _dwell_timing_rows(log_p, c, min_var=0.25) -> list:
                      "z": -abs(float(z))}
     if worst is not None:
         rows.append(worst)
-    if den > 0:
+    lag_z = float(num / np.sqrt(den)) if den > 0 else None
+    if lag_z is not None:
         rows.append({"covariate": _SUCCESSIVE_DWELLS,
                      "where": ("in the dwell timing, where successive dwells of a count end "
                                "early or late together (a change slower than a cycle, or a "
                                "shape repeated every cycle, that the fit does not follow)"),
-                     "z": -float(num / np.sqrt(den))})
-    return rows
+                     "z": -lag_z})
+    return rows, lag_z
 
 
 def misfit_trace(m, t, counts, min_var=1.0, floor=-50.0, local_z=DEFAULT_LOCAL_Z) -> dict:
@@ -433,7 +438,10 @@ def misfit_trace(m, t, counts, min_var=1.0, floor=-50.0, local_z=DEFAULT_LOCAL_Z
     ``m`` is a point fit of :func:`compare_effect_models` (``full_fits``); with
     ``count_jump`` its most probable jump is taken out first (counts are then named in the
     frame of the reference segment). Returns ``covariate``, ``where``,
-    ``z``, ``z_all`` (every sample) and ``by_covariate`` (the worst bin of each covariate).
+    ``z``, ``z_all`` (every sample), ``by_covariate`` (the worst bin of each covariate) and
+    ``detail`` for a figure (:func:`enclab.lrde.plots.misfit_plot`): per covariate the short
+    label and ``z`` of each bin (NaN where left out), the dwells' start times, centred
+    mid-ranks and kinds, the successive-dwell ``lag_z`` (high is bad) and ``local_z``.
     """
     offsets = 0
     if "count_jump" in m["effects"]:
@@ -456,11 +464,14 @@ def misfit_trace(m, t, counts, min_var=1.0, floor=-50.0, local_z=DEFAULT_LOCAL_Z
     observed = (np.take_along_axis(alternatives, (moved + 1)[None, :], axis=0)[0]
                 if np.all(np.abs(moved) <= 1) else log_p(c))
     centred = observed - mean
-    rows = []
-    for name, labels, words in _trace_covariates(m, t, prev):
+    rows, bins = [], {}
+    for name, labels, words, short in _trace_covariates(m, t, prev):
         n_bins = len(words)
         total = np.bincount(labels, weights=centred, minlength=n_bins)
         spread = np.bincount(labels, weights=var, minlength=n_bins)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            bins[name] = {"label": short, "z": np.where(spread >= min_var,
+                                                        total / np.sqrt(spread), np.nan)}
         if name == "time in the log":
             # A change that lasts (a missed count, a slipped part) shows best as the log
             # from some tenth on, or up to it: those sets join the tenths.
@@ -477,7 +488,9 @@ def misfit_trace(m, t, counts, min_var=1.0, floor=-50.0, local_z=DEFAULT_LOCAL_Z
         z = np.where(ok, total / np.sqrt(np.where(ok, spread, 1.0)), np.inf)
         k = int(np.argmin(z))
         rows.append({"covariate": name, "where": words[k], "z": float(z[k])})
-    rows += _dwell_timing_rows(log_p, c)
+    s, dwell_var, key, start = dwell_ranks(log_p, c)
+    dwell_rows, lag_z = _dwell_timing_rows(s, dwell_var, key)
+    rows += dwell_rows
     rows.sort(key=lambda r: r["z"])
     z_all = float(centred.sum() / np.sqrt(var.sum())) if var.sum() > 0 else 0.0
     worst = rows[0] if rows else {}
@@ -486,7 +499,9 @@ def misfit_trace(m, t, counts, min_var=1.0, floor=-50.0, local_z=DEFAULT_LOCAL_Z
         # Successive dwells alike say how the misfit acts, not where: a part of the log, the
         # stroke or one count that fails too names it better.
         worst = placing[0]
-    return {**worst, "z_all": z_all, "by_covariate": rows}
+    detail = {"bins": bins, "local_z": local_z, "lag_z": lag_z,
+              "dwells": {"t": t[start], "s": s, "key": key}}
+    return {**worst, "z_all": z_all, "by_covariate": rows, "detail": detail}
 
 
 def predictive_check(m, t, counts, rng, n_sim=20) -> dict:
@@ -587,7 +602,9 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
         ``chosen_effects``, ``indistinguishable`` and ``not_ruled_out`` (labels), ``check``
         ``{z, observed, sim_mean, sim_sd, trusted}``, ``n_cycles``, ``rule``, ``full_fits``
         (label -> point fit of the whole log; the sinusoid, every model tried on the full log,
-        the chosen one and each one listed in ``indistinguishable`` or ``not_ruled_out``).
+        the chosen one and each one listed in ``indistinguishable`` or ``not_ruled_out``) and
+        ``trace_detail`` (the localized check's bins and dwells, see :func:`misfit_trace`;
+        ``check["trace"]`` holds the rest).
     """
     t = np.asarray(t, dtype=float)
     counts = np.asarray(counts)
@@ -723,6 +740,7 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
     chosen_fit = full_fit(best["label"], tuple(best["harmonics"]), tuple(best["effects"]))
     check = predictive_check(chosen_fit, t, counts, rng, n_sim=n_sim)
     trace = misfit_trace(chosen_fit, t, counts, local_z=local_z)
+    trace_detail = trace.pop("detail")
     localized = bool(trace.get("z", 0.0) < local_z)
     check |= {"trusted": bool(check["z"] >= trust_z and not localized), "threshold_z": trust_z,
               "localized": localized, "local_z": local_z, "trace": trace}
@@ -750,4 +768,4 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
                      "simulated readings, or when on one tenth of the log, one part of the "
                      "stroke or one count left or held the readings' log-probability lies "
                      f"more than {-local_z:g} standard deviations below what the fit expects"),
-            "full_fits": full}
+            "full_fits": full, "trace_detail": trace_detail}

@@ -222,7 +222,8 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
         The ``lrde`` block of ``summary.json`` (:func:`enclab.lrde.report.summary_block`)
         plus ``channels`` (what was used).
     figures : dict of str to matplotlib.figure.Figure
-        ``"corner"``, ``"dwell_ppc"`` and ``"bias_cycles"`` (paper 002 Fig. 6 from the log).
+        ``"corner"``, ``"dwell_ppc"``, ``"bias_cycles"`` (paper 002 Fig. 6 from the log) and
+        ``"misfit"`` (the localized check of the chosen model).
     report_md : str
     cycles : pandas.DataFrame
         :func:`enclab.lrde.dwell.cycle_table` of the measured counts.
@@ -333,6 +334,8 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
             block["centre_count"])
     figures = {"corner": plots.corner_plot(result),
                "dwell_ppc": plots.dwell_ppc_plot(cycles, predictive),
-               "bias_cycles": plots.bias_cycles_plot(cycles, step, truth_periods)}
+               "bias_cycles": plots.bias_cycles_plot(cycles, step, truth_periods),
+               "misfit": plots.misfit_plot(None if comparison is None
+                                           else comparison["trace_detail"])}
     report_md = report.report_markdown(block, meta.get("log_id"))
     return block, figures, report_md, cycles

@@ -19,7 +19,7 @@ from matplotlib.figure import Figure
 from enclab.lrde import dwell, model
 
 __all__ = ["corner_plot", "posterior_predictive_dwell", "dwell_ppc_plot", "closed_loop_plot",
-           "bias_cycles_plot", "truth_bias_deviation"]
+           "bias_cycles_plot", "truth_bias_deviation", "misfit_plot"]
 
 _DEG = 180.0 / np.pi
 
@@ -216,4 +216,72 @@ def bias_cycles_plot(cycles: pd.DataFrame, step: float, truth_periods: pd.DataFr
     ax_n.set_ylabel("readings peak to peak [steps]")
     ax_n.set_xlabel("time [s]")
     ax_n.yaxis.get_major_locator().set_params(integer=True)
+    return fig
+
+
+def misfit_plot(detail: dict | None) -> Figure:
+    """The localized check of the chosen model (:func:`enclab.lrde.compare.misfit_trace`).
+
+    Top: the readings' log-probability against what the fit expects, as ``z`` per tenth of
+    the log (left) and per part of the stroke and count left or held (right), with the
+    threshold ``local_z`` below which the estimates are flagged. Bottom: each dwell's end as
+    its centred mid-rank under the fit (above zero: it ended later than the fit's median),
+    one line per count and entry side. Noise scatters these around zero; a drift draws them
+    out into slow curves, a shape the fit lacks holds a line off zero. The title gives the
+    successive-dwell ``z``. ``detail`` None (no comparison ran) draws a note instead.
+    """
+    fig = Figure(figsize=(10, 6.5), layout="constrained")
+    if not detail:
+        ax = fig.subplots()
+        ax.axis("off")
+        ax.text(0.5, 0.5, "no model comparison ran: no localized check",
+                ha="center", va="center")
+        return fig
+    grid = fig.add_gridspec(2, 2, width_ratios=(1.4, 1))
+    ax_time, ax_parts = fig.add_subplot(grid[0, 0]), fig.add_subplot(grid[0, 1])
+    ax_dwell = fig.add_subplot(grid[1, :])
+    local_z = detail["local_z"]
+    bins = detail["bins"]
+    for ax in (ax_time, ax_parts):
+        ax.axhline(0.0, color="0.5", lw=0.8)
+        ax.axhline(local_z, color="C3", ls="--", lw=0.8)
+    time = bins.get("time in the log")
+    if time is not None:
+        z = np.asarray(time["z"], dtype=float)
+        ax_time.bar(np.arange(z.size), np.nan_to_num(z), color=np.where(z < local_z, "C3", "C0"))
+        ax_time.set_xticks(np.arange(z.size), time["label"], fontsize=7)
+        ax_time.set_xlabel("tenth of the log (centre, s)")
+    ax_time.set_ylabel("z (readings vs fit)")
+    ax_time.set_title(f"per tenth of the log; flagged below {local_z:g}", fontsize=9)
+    labels, values = [], []
+    for name, prefix in (("position and direction of the motion", ""),
+                         ("count before the sample", "count ")):
+        part = bins.get(name)
+        if part is not None:
+            labels += [prefix + str(label) for label in part["label"]]
+            values += list(np.asarray(part["z"], dtype=float))
+    values = np.array(values)
+    ax_parts.bar(np.arange(values.size), np.nan_to_num(values),
+                 color=np.where(values < local_z, "C3", "C0"))
+    ax_parts.set_xticks(np.arange(values.size), labels, rotation=60, ha="right", fontsize=7)
+    ax_parts.set_title("per part of the stroke and count left or held", fontsize=9)
+    dwells = detail["dwells"]
+    t_d, s, key = (np.asarray(dwells[k]) for k in ("t", "s", "key"))
+    for k in np.unique(key):
+        mine = key == k
+        if mine.sum() < 2:
+            continue
+        level, side = divmod(int(k) + 1, 3)
+        ax_dwell.plot(t_d[mine], s[mine], ".-", ms=3, lw=0.7,
+                      label=f"count {level} from {('above', 'start', 'below')[side]}")
+    ax_dwell.axhline(0.0, color="0.5", lw=0.8)
+    ax_dwell.set_ylim(-0.55, 0.55)
+    ax_dwell.set_xlabel("dwell start [s]")
+    ax_dwell.set_ylabel("dwell end: mid-rank - 1/2")
+    lag = detail.get("lag_z")
+    ax_dwell.set_title("dwells' ends under the fit" + (
+        f"; successive dwells alike: z = {lag:.1f} (flagged above {-local_z:g})"
+        if lag is not None else ""), fontsize=9)
+    if len(np.unique(key)) <= 12:
+        ax_dwell.legend(fontsize=7, ncol=6, loc="upper center", bbox_to_anchor=(0.5, -0.2))
     return fig
