@@ -53,7 +53,8 @@ TABLES = [
     ("lrde_misfit_trace.csv", "Low-resolution encoder: effects outside the catalogue",
      "The localized check on catalogued effects (false flags) and on effects no candidate "
      "describes (flagged, placed on the covariate where they act, or misnamed; "
-     "`lrde_misfit_trace.py`)."),
+     "`lrde_misfit_trace.py`). Rows with `flagged_headed_by_dwells` empty are of a check "
+     "without the dwell rows; runs with the same command use the same seeds."),
     ("lrde_calibration.csv", "Low-resolution encoder: the posterior's own calibration",
      "Coverage of the 90 % intervals when the true model is fitted (no comparison, no pooling), "
      "and of E_b's posterior with every other parameter at the truth (`lrde_calibration.py`)."),
