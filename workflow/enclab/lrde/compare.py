@@ -767,5 +767,7 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
                      f"more than {-trust_z:g} standard deviations below that of its own "
                      "simulated readings, or when on one tenth of the log, one part of the "
                      "stroke or one count left or held the readings' log-probability lies "
-                     f"more than {-local_z:g} standard deviations below what the fit expects"),
+                     f"more than {-local_z:g} standard deviations below what the fit expects, "
+                     "or the dwells of one count end early or late, or successive dwells of a "
+                     f"count do so together, by more than {-local_z:g} standard deviations"),
             "full_fits": full, "trace_detail": trace_detail}
