@@ -338,8 +338,8 @@ def trust_block(fit, model_block: dict) -> dict:
                            f"deviations below its own simulated readings{where}")
         else:
             reasons.append(f"the chosen model ({model_block.get('chosen')}) leaves a misfit "
-                           f"{trace.get('where')}: there the readings score {trace['z']:.1f} "
-                           "standard deviations below what it expects, an effect none of the "
+                           f"{trace.get('where')}: there the readings lie {-trace['z']:.1f} "
+                           "standard deviations from what it expects, an effect none of the "
                            "candidates describes (its name may be a stand-in)")
     if not fit.converged:
         reasons.append("the sampler did not converge (R-hat > 1.01 or ESS < 1000)")
