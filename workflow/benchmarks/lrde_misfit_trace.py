@@ -180,14 +180,11 @@ def main(argv=None):
     out.mkdir(parents=True, exist_ok=True)
     if args.from_draws:
         draws = pd.read_csv(args.from_draws)
-        summary = summarise(draws, float(draws["local_z"].iloc[0]) if "local_z" in draws
-                            else args.local_z)
-        if "date" in draws:
-            # The summary is of that run: its date, machine and command.
-            first = draws.iloc[0]
-            summary = stamp(summary.assign(**{k: first[k] for k in ("date", "machine",
-                                                                    "command")}))
-        _write_summary(summary, args.keep, out)
+        # The summary is of that run: its date, machine and command.
+        first = draws.iloc[0]
+        summary = summarise(draws, args.local_z).assign(
+            **{k: first[k] for k in ("date", "machine", "command") if k in draws})
+        _write_summary(stamp(summary), args.keep, out)
         return
     rows = []
     for cycles in args.cycles:

@@ -361,6 +361,12 @@ def dwell_ranks(log_p, c):
 _SUCCESSIVE_DWELLS = "dwell timing from cycle to cycle"
 
 
+def _dwell_kind(key):
+    """``(count, side it was entered from)`` of a :func:`dwell_ranks` key."""
+    level, side = divmod(int(key) + 1, 3)
+    return level, ("above", "the start of the log", "below")[side]
+
+
 def _dwell_timing_rows(s, var, key, min_var=0.25) -> tuple:
     """Rows of :func:`misfit_trace` from the timing of the dwells (:func:`dwell_ranks`).
 
@@ -391,8 +397,7 @@ def _dwell_timing_rows(s, var, key, min_var=0.25) -> tuple:
             continue
         z = s[ds].sum() / np.sqrt(spread)
         if worst is None or -abs(z) < worst["z"]:
-            level, side = divmod(int(k) + 1, 3)
-            side = ("above", "the start of the log", "below")[side]
+            level, side = _dwell_kind(k)
             worst = {"covariate": "dwell length per count",
                      "where": (f"in the dwells in count {level} entered from {side}, which "
                                f"end {'later' if z > 0 else 'earlier'} than the fit expects"),
@@ -441,7 +446,8 @@ def misfit_trace(m, t, counts, min_var=1.0, floor=-50.0, local_z=DEFAULT_LOCAL_Z
     ``z``, ``z_all`` (every sample), ``by_covariate`` (the worst bin of each covariate) and
     ``detail`` for a figure (:func:`enclab.lrde.plots.misfit_plot`): per covariate the short
     label and ``z`` of each bin (NaN where left out), the dwells' start times, centred
-    mid-ranks and kinds, the successive-dwell ``lag_z`` (high is bad) and ``local_z``.
+    mid-ranks and kinds (keys, and a label per key), the successive-dwell ``lag_z`` (high is
+    bad) and ``local_z``.
     """
     offsets = 0
     if "count_jump" in m["effects"]:
@@ -469,9 +475,6 @@ def misfit_trace(m, t, counts, min_var=1.0, floor=-50.0, local_z=DEFAULT_LOCAL_Z
         n_bins = len(words)
         total = np.bincount(labels, weights=centred, minlength=n_bins)
         spread = np.bincount(labels, weights=var, minlength=n_bins)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            bins[name] = {"label": short, "z": np.where(spread >= min_var,
-                                                        total / np.sqrt(spread), np.nan)}
         if name == "time in the log":
             # A change that lasts (a missed count, a slipped part) shows best as the log
             # from some tenth on, or up to it: those sets join the tenths.
@@ -483,9 +486,10 @@ def misfit_trace(m, t, counts, min_var=1.0, floor=-50.0, local_z=DEFAULT_LOCAL_Z
             words = (list(words) + [f"from the start of the log to {e:.3g} s" for e in edges]
                      + [f"from {e:.3g} s to the end of the log" for e in edges])
         ok = spread >= min_var
+        z = np.where(ok, total / np.sqrt(np.where(ok, spread, 1.0)), np.inf)
+        bins[name] = {"label": short, "z": np.where(ok, z, np.nan)[:len(short)]}
         if not ok.any():
             continue
-        z = np.where(ok, total / np.sqrt(np.where(ok, spread, 1.0)), np.inf)
         k = int(np.argmin(z))
         rows.append({"covariate": name, "where": words[k], "z": float(z[k])})
     s, dwell_var, key, start = dwell_ranks(log_p, c)
@@ -500,7 +504,9 @@ def misfit_trace(m, t, counts, min_var=1.0, floor=-50.0, local_z=DEFAULT_LOCAL_Z
         # stroke or one count that fails too names it better.
         worst = placing[0]
     detail = {"bins": bins, "local_z": local_z, "lag_z": lag_z,
-              "dwells": {"t": t[start], "s": s, "key": key}}
+              "dwells": {"t": t[start], "s": s, "key": key,
+                         "kind": {int(k): "count {} from {}".format(*_dwell_kind(k))
+                                  for k in np.unique(key)}}}
     return {**worst, "z_all": z_all, "by_covariate": rows, "detail": detail}
 
 

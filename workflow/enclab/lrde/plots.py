@@ -269,11 +269,8 @@ def misfit_plot(detail: dict | None) -> Figure:
     t_d, s, key = (np.asarray(dwells[k]) for k in ("t", "s", "key"))
     for k in np.unique(key):
         mine = key == k
-        if mine.sum() < 2:
-            continue
-        level, side = divmod(int(k) + 1, 3)
-        ax_dwell.plot(t_d[mine], s[mine], ".-", ms=3, lw=0.7,
-                      label=f"count {level} from {('above', 'start', 'below')[side]}")
+        if mine.sum() >= 2:
+            ax_dwell.plot(t_d[mine], s[mine], ".-", ms=3, lw=0.7, label=dwells["kind"][int(k)])
     ax_dwell.axhline(0.0, color="0.5", lw=0.8)
     ax_dwell.set_ylim(-0.55, 0.55)
     ax_dwell.set_xlabel("dwell start [s]")

@@ -316,6 +316,11 @@ _UNCONFIRMED_BIASES = {
 }
 
 
+def _whole_log_check_passed(check: dict) -> bool:
+    """The predictive check alone (``trusted`` also holds the localized one)."""
+    return check["z"] >= check.get("threshold_z", -np.inf)
+
+
 def trust_block(fit, model_block: dict) -> dict:
     """Per reported quantity ``{trusted, reason}``.
 
@@ -332,7 +337,7 @@ def trust_block(fit, model_block: dict) -> dict:
         trace = check.get("trace") or {}
         where = (f"; the misfit is worst {trace['where']} (z = {trace['z']:.1f})"
                  if trace.get("where") else "")
-        if check["z"] < check.get("threshold_z", -np.inf):
+        if not _whole_log_check_passed(check):
             reasons.append(f"no candidate model explains the readings: the chosen model "
                            f"({model_block.get('chosen')}) scores {check['z']:.1f} standard "
                            f"deviations below its own simulated readings{where}")
@@ -486,10 +491,11 @@ def _effect_lines(block: dict) -> list[str]:
     lines += _reference_lines(m.get("reference"))
     check = m.get("check") or {}
     if check:
-        passed = check["z"] >= check.get("threshold_z", -np.inf)
+        verdict = ("passed" if _whole_log_check_passed(check)
+                   else "FAILED: estimates untrusted")
         lines += ["", f"Predictive check: the chosen model's log-likelihood is "
                   f"{check['z']:.1f} standard deviations from that of its own simulated readings "
-                  f"-> {'passed' if passed else 'FAILED: estimates untrusted'}."]
+                  f"-> {verdict}."]
         trace = check.get("trace") or {}
         if trace.get("where"):
             worst = "; ".join(f"{r['covariate']}: {r['where']} ({r['z']:.1f})"
