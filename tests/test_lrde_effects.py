@@ -189,17 +189,29 @@ def test_effect_names_are_checked():
     assert effects.check_effects(("time_jitter", "hysteresis")) == ("hysteresis", "time_jitter")
 
 
-def test_sparse_interval_log_probability_matches_the_exact_form_in_every_regime():
-    # Bounds across both tails and widths from 1e-3 to 30 standard deviations: the skipped
-    # entries are those with both bounds beyond 8 (value above -1.3e-15), the others agree
-    # with the reflected two-bound form to rounding.
+@pytest.mark.parametrize("both_deep", [0.5, 0.0])
+def test_interval_log_probability_matches_the_exact_form_in_every_regime(both_deep):
+    # Bounds across both tails and widths from 1e-3 to 30 standard deviations, and a share
+    # of entries with both bounds beyond 8: those are left out (value above -1.3e-15), the
+    # others agree with the reflected two-bound form to rounding. With half the entries left
+    # out the rest are gathered and evaluated by kind; with none, all are evaluated in place.
     rng = np.random.default_rng(11)
     lower = rng.uniform(-40.0, 40.0, (64, 400))
-    width = 10.0 ** rng.uniform(-3.0, 1.5, lower.shape)
-    upper = lower + width
-    keep, vals = effects._log_interval_sparse(lower, upper)
+    upper = lower + 10.0 ** rng.uniform(-3.0, 1.5, lower.shape)
+    deep = rng.uniform(size=lower.shape) < both_deep
+    lower[deep] = -rng.uniform(8.01, 40.0, deep.sum())
+    upper[deep] = rng.uniform(8.01, 40.0, deep.sum())
+    if both_deep == 0.0:  # no wide interval reaches past both -8 and 8 either
+        upper = np.where((lower < -8) & (upper > 8), 7.5, upper)
+    keep, vals = effects._log_interval_near(lower, upper)
+    assert (keep is None) == (both_deep == 0.0)
+    full = effects._log_interval_full(lower, upper).ravel()
     exact = effects._log_interval(lower, upper).ravel()
-    skipped = np.setdiff1d(np.arange(lower.size), keep)
-    assert np.all(lower.ravel()[skipped] < -8) and np.all(upper.ravel()[skipped] > 8)
-    assert np.all(exact[skipped] > -1.3e-15)
-    np.testing.assert_allclose(vals, exact[keep], rtol=1e-9, atol=1e-14)
+    left_out = (lower.ravel() < -8) & (upper.ravel() > 8)
+    assert np.all(full[left_out] == 0.0) and np.all(exact[left_out] > -1.3e-15)
+    if keep is not None:
+        np.testing.assert_array_equal(keep, np.flatnonzero(~left_out))
+        np.testing.assert_array_equal(vals, full[keep])
+    np.testing.assert_allclose(full[~left_out], exact[~left_out], rtol=1e-9, atol=1e-14)
+    np.testing.assert_allclose(effects._log_interval_rows(lower, upper),
+                               full.reshape(lower.shape).sum(axis=1), rtol=1e-12)

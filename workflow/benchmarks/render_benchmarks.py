@@ -63,6 +63,9 @@ TABLES = [
      "stage's findings, coverage of A12, E_b, a and b before and after (`lrde_truth_loop.py`)."),
     ("lrde_stage.csv", "Low-resolution encoder: stage cost",
      "Wall time of the whole LRDE stage of the embedded logs (`bench_lrde_stage.py`; target 30 s)."),
+    ("lrde_interval.csv", "Low-resolution encoder: interval probabilities",
+     "Cost of the likelihood's interval probabilities, near entries gathered by kind or every "
+     "entry in place, by position noise (`bench_lrde_interval.py`)."),
     ("lrde_oracle_summary.csv", "Low-resolution encoder: the information bound",
      "The best RMSE any estimator could reach on the same draws (`lrde_oracle_bound.py`)."),
     ("lrde_throughput_summary.csv", "Low-resolution encoder: MCMC cost",

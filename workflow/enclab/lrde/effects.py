@@ -180,16 +180,39 @@ def _log_interval(lo, hi):
 
 _DEEP = 8.0
 _SQRT_HALF = np.sqrt(0.5)
+# From this share of near entries on, every entry is evaluated in place: gathering them and
+# sorting them by kind costs more than the special functions it saves
+# (workflow/benchmarks/bench_lrde_interval.py).
+_DENSE_SHARE = 0.5
 
 
-def _log_interval_sparse(lower, upper):
+def _log_interval_near(lower, upper):
     """``log(Phi(upper) - Phi(lower))`` at the entries where it differs from 0 noticeably.
 
-    Returns the flat indices of those entries and their values; every other entry has
-    ``lower < -8`` and ``upper > 8`` and its value is above ``-1.3e-15``. The others, by kind:
+    Returns ``(keep, vals)``: the flat indices of those entries and their values, or
+    ``keep = None`` and ``vals`` of every entry in flat order (the entries not near are then
+    0). An entry is near when ``lower >= -8`` or ``upper <= 8``; every other entry is above
+    ``-1.3e-15``. Few near entries are gathered and evaluated by kind
+    (:func:`_log_interval_sparse`); when most are near, all are evaluated in place
+    (:func:`_log_interval_dense`), which saves the gathering and the masks by kind.
+    """
+    near = lower >= -_DEEP
+    near |= upper <= _DEEP
+    count = np.count_nonzero(near)
+    if count < _DENSE_SHARE * near.size:
+        keep = np.flatnonzero(near)
+        return keep, _log_interval_sparse(lower.ravel()[keep], upper.ravel()[keep])
+    vals = _log_interval_dense(lower.ravel(), upper.ravel())
+    if count < near.size:
+        vals = np.where(near.ravel(), vals, 0.0)
+    return None, vals
+
+
+def _log_interval_sparse(lo, up):
+    """``log(Phi(up) - Phi(lo))`` of near entries (1-d), by kind:
 
     - one bound beyond 8 standard deviations and the interval reaching past 0
-      (``lower < -8``, ``upper >= 0``, or the mirror image): the far bound's
+      (``lo < -8``, ``up >= 0``, or the mirror image): the far bound's
       ``Phi(-8) = 6.2e-16`` is dropped against a probability above 1/2, and
       ``log Phi(x) = log1p(-erfc(x / sqrt 2) / 2)`` for the near bound ``x >= 0``;
     - both bounds within 8: ``log`` of the difference of the two tail probabilities
@@ -199,14 +222,10 @@ def _log_interval_sparse(lower, upper):
     - the rest (an interval entirely beyond 8 on one side): the exact reflected form
       :func:`_log_interval`.
     """
-    lo_near = lower >= -_DEEP
-    up_near = upper <= _DEEP
-    keep = np.flatnonzero(lo_near | up_near)
-    lo, up = lower.ravel()[keep], upper.ravel()[keep]
-    lo_near, up_near = lo_near.ravel()[keep], up_near.ravel()[keep]
+    lo_near, up_near = lo >= -_DEEP, up <= _DEEP
     both = lo_near & up_near
     single = ~both & np.where(lo_near, lo <= 0.0, up >= 0.0)
-    vals = np.empty(keep.size)
+    vals = np.empty(lo.size)
     x = np.where(lo_near[single], -lo[single], up[single])
     vals[single] = np.log1p(-0.5 * erfc(x * _SQRT_HALF))
     up_pos = up[both] > 0.0
@@ -217,7 +236,63 @@ def _log_interval_sparse(lower, upper):
     rest = ~(both | single)
     if np.any(rest):
         vals[rest] = _log_interval(lo[rest], up[rest])
-    return keep, vals
+    return vals
+
+
+def _log_interval_dense(lo, up):
+    """``log(Phi(up) - Phi(lo))`` of every entry (1-d): ``log`` of the difference of the two
+    tail probabilities on the side of 0 where both are smallest, as
+    :func:`_log_interval_sparse` for two near bounds. A tail beyond 8 on the far side of its
+    bound is taken as 2 (or 0): that drops at most ``1.2e-15`` against a tail above 1/2 (the
+    interval reaches past 0). An interval entirely beyond 8 on one side takes the exact
+    reflected form :func:`_log_interval`.
+    """
+    up_pos = up > 0.0
+    a = np.where(up_pos, lo, -up)
+    b = np.where(up_pos, up, -lo)
+    a *= _SQRT_HALF
+    b *= _SQRT_HALF
+    deep = _DEEP * _SQRT_HALF
+    diff = _erfc_where(a, a >= -deep, 2.0)
+    diff -= _erfc_where(b, (b <= deep) | (a > 0.0), 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        vals = np.log(diff)
+    vals += np.log(0.5)
+    beyond = np.flatnonzero(a > deep)
+    if beyond.size:
+        vals[beyond] = _log_interval(lo[beyond], up[beyond])
+    return vals
+
+
+def _erfc_where(x, needed, fill):
+    """``erfc(x)`` where ``needed``, ``fill`` elsewhere; only the needed entries are evaluated
+    when they are few enough to pay for gathering them."""
+    idx = np.flatnonzero(needed)
+    if idx.size == x.size:
+        return erfc(x)
+    if idx.size >= _DENSE_SHARE * x.size:
+        return np.where(needed, erfc(x), fill)
+    out = np.full(x.shape, fill)
+    out[idx] = erfc(x[idx])
+    return out
+
+
+def _log_interval_rows(lower, upper):
+    """Row sums of ``log(Phi(upper) - Phi(lower))`` (2-d bounds), as :func:`_log_interval_near`."""
+    keep, vals = _log_interval_near(lower, upper)
+    if keep is None:
+        return vals.reshape(lower.shape).sum(axis=1)
+    return np.bincount(keep // lower.shape[1], weights=vals, minlength=lower.shape[0])
+
+
+def _log_interval_full(lower, upper):
+    """``log(Phi(upper) - Phi(lower))`` of every entry, as :func:`_log_interval_near`."""
+    keep, vals = _log_interval_near(lower, upper)
+    if keep is None:
+        return vals.reshape(lower.shape)
+    out = np.zeros(lower.shape)
+    out.ravel()[keep] = vals
+    return out
 
 
 def _previous(counts, prev_counts):
@@ -316,10 +391,7 @@ def pointwise_log_likelihood(params, t, counts, step, centre_count, t_ref, harmo
     effects = check_effects(effects)
     lower, upper = _interval_bounds(p, t, counts, centre_count, t_ref, harmonics, effects,
                                     offset, time_blur, grid, prev_counts)
-    out = np.zeros(lower.shape)
-    keep, vals = _log_interval_sparse(lower, upper)
-    out.ravel()[keep] = vals
-    return out
+    return _log_interval_full(lower, upper)
 
 
 def _jump_terms(params, t, counts, step, centre_count, t_ref, harmonics, effects, grid=None,
@@ -359,8 +431,7 @@ def log_likelihood(params, t, counts, step, centre_count, t_ref, harmonics=(), e
     if "count_jump" not in effects:
         lower, upper = _interval_bounds(p, t, counts, centre_count, t_ref, harmonics, effects,
                                         0, 0.0, grid, prev_counts)
-        keep, vals = _log_interval_sparse(lower, upper)
-        out = np.bincount(keep // lower.shape[1], weights=vals, minlength=p.shape[0])
+        out = _log_interval_rows(lower, upper)
     else:
         terms, _ = _jump_terms(p, t, counts, step, centre_count, t_ref, harmonics, effects,
                                grid, prev_counts)

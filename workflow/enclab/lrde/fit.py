@@ -48,8 +48,11 @@ half-step for all of them, evaluated in cache-sized slices of walkers). On a uni
 grid the sine comes from block-wise complex rotation instead of ``np.sin``, and only samples
 within 8 standard deviations of an interval edge reach a special function
 (workflow/benchmarks/bench_lrde_throughput.py measures both against ``np.sin`` and a
-``log_ndtr`` of every sample): one ``erfc`` where a single edge is near, two where both are
-(:func:`enclab.lrde.effects._log_interval_sparse`). The effect models' likelihood
+``log_ndtr`` of every sample): one ``erfc`` where a single edge is near, two where both are.
+When most samples are near (a wide jitter, or the held-out comparison's time blur), all are
+evaluated in place instead of being gathered and sorted by kind
+(:func:`enclab.lrde.effects._log_interval_near`; workflow/benchmarks/bench_lrde_interval.py).
+The effect models' likelihood
 (:mod:`enclab.lrde.effects`) shares both, and takes the harmonics ``cos k phi, sin k phi``
 as powers of the phase factor.
 
@@ -214,13 +217,10 @@ def log_likelihood(params, t, counts, step, centre_count, t_ref, grid=None, harm
 def _log_interval_prob_scaled(lower, inv_s):
     """Row sums of ``log(Phi(lower + inv_s) - Phi(lower))`` (intervals of width ``1/s``).
 
-    Entries with both bounds beyond ``_DEEP`` of 0 are skipped (each above ``-1.3e-15``); an
-    entry with a single near bound costs one ``log_ndtr``, the others the exact two-bound
-    form (:func:`enclab.lrde.effects._log_interval_sparse`).
+    Entries with both bounds beyond ``_DEEP`` of 0 count as 0 (each is above ``-1.3e-15``),
+    see :func:`enclab.lrde.effects._log_interval_near`.
     """
-    upper = lower + inv_s
-    keep, vals = lrde_effects._log_interval_sparse(lower, upper)
-    return np.bincount(keep // lower.shape[1], weights=vals, minlength=lower.shape[0])
+    return lrde_effects._log_interval_rows(lower, lower + inv_s)
 
 
 def log_probability(params, t, counts, step, centre_count, t_ref, bounds, grid=None,
