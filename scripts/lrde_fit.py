@@ -14,7 +14,8 @@ def main(smk):
     seed = [int(settings.pop("seed", 0)), zlib.crc32(meta["log_id"].encode())]
     references = references_by_channel(atomic.read_json(p) for p in smk.input.residuals)
     block, figures, report_md, cycles = analyse_lrde_log(df, meta, seed, settings,
-                                                         references=references)
+                                                         references=references,
+                                                         threads=smk.threads)
     block["seed"] = seed
     atomic.write_table(cycles, smk.output.cycles)
     atomic.save_figure(figures["corner"], smk.output.corner)

@@ -177,3 +177,16 @@ def test_predictive_check_flags_a_log_no_candidate_explains():
                                         candidates=EFFECT_CANDIDATES + [((), ("count_jump",))],
                                         pairs=False)
     assert out["chosen"] == "count_jump" and out["check"]["trusted"]
+
+
+def test_effect_comparison_with_two_processes_equals_the_sequential_one():
+    # The candidates' point fits run side by side in forked workers: same fits, same choice.
+    t, c = _effect_log(11, hysteresis=STEP / 6)
+    one = compare.compare_effect_models(t, c, STEP, 1, candidates=EFFECT_CANDIDATES)
+    two = compare.compare_effect_models(t, c, STEP, 1, candidates=EFFECT_CANDIDATES, threads=2)
+    assert one["chosen"] == two["chosen"] == "hysteresis"
+    assert one["models"] == two["models"] and one["check"] == two["check"]
+    assert list(one["full_fits"]) == list(two["full_fits"])
+    for label, m in one["full_fits"].items():
+        np.testing.assert_array_equal(m["x"], two["full_fits"][label]["x"])
+        assert m["log_lik_blurred"] == two["full_fits"][label]["log_lik_blurred"]

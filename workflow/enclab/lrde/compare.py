@@ -34,6 +34,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.special import logsumexp
 
+from enclab.core import parallel
 from enclab.lrde import effects as lrde_effects
 from enclab.lrde import fit as lrde_fit
 from enclab.lrde.effects import model_label
@@ -536,20 +537,24 @@ def predictive_check(m, t, counts, rng, n_sim=20) -> dict:
             "z": float((observed - scores.mean()) / sd) if sd > 0 else 0.0}
 
 
-def _fold_fits(t, counts, prev, step, folds, harmonics, effects, base_fits, init, fit_kwargs):
-    fits = []
-    for fold, (train, _) in enumerate(folds):
-        start = None if base_fits is None else base_fits[fold]["x"]
-        fits.append(lrde_fit.map_fit(t[train], counts[train], step, harmonics=harmonics,
-                                     effects=effects, start=start, init=init,
-                                     prev_counts=prev[train], **fit_kwargs))
-    return fits
+def _full_fit(t, counts, step, harmonics, effects, start, init, fit_kwargs):
+    """Point fit of one model on the whole log, with the held-out score's time blur."""
+    m = lrde_fit.map_fit(t, counts, step, harmonics=harmonics, effects=effects, start=start,
+                         init=init, **fit_kwargs)
+    return m | {"log_lik_blurred": _blurred_log_lik(m, t, counts)}
+
+
+def _fold_fit(t, counts, prev, step, train, harmonics, effects, start, init, fit_kwargs):
+    """Point fit of one model on one fold's training cycles."""
+    return lrde_fit.map_fit(t[train], counts[train], step, harmonics=harmonics,
+                            effects=effects, start=start, init=init, prev_counts=prev[train],
+                            **fit_kwargs)
 
 
 def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, min_z=2.0,
                           f_hz=None, n_sim=20, trust_z=DEFAULT_TRUST_Z, pairs=True,
                           sigma_range=None, sigma_prior="uniform", min_gain=1.0,
-                          local_z=DEFAULT_LOCAL_Z) -> dict:
+                          local_z=DEFAULT_LOCAL_Z, threads=1) -> dict:
     """Held-out comparison of motion, encoder and clock effects by point fits (two folds).
 
     Each candidate ``(harmonics, effects)`` is fitted (:func:`enclab.lrde.fit.map_fit`) on the
@@ -599,6 +604,10 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
     ``local_z`` is a misfit the chosen model leaves (an effect outside the candidates, absorbed
     by the nearest ones): the estimates are flagged, and the trace says where it acts.
 
+    ``threads`` processes fit the candidates' folds side by side
+    (:func:`enclab.core.parallel.map_forked`); the point fits are deterministic, so the
+    result is the same with any number.
+
     Returns
     -------
     dict
@@ -631,9 +640,11 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
     # before it in the log, not the last reading of the fold's previous cycle.
     prev = np.concatenate((counts[:1], counts[:-1])).astype(float)
 
-    def evaluate(harmonics, effects, base):
-        fits = _fold_fits(t, counts, prev, step, folds, harmonics, effects, base, init,
-                          fit_kwargs)
+    def fold_jobs(harmonics, effects, base):
+        return [(t, counts, prev, step, train, harmonics, effects, b["x"], init, fit_kwargs)
+                for (train, _), b in zip(folds, base)]
+
+    def scored(fits):
         units, totals = [], []
         for (train, test), m in zip(folds, fits):
             total, lp = _predict(m, t[test], counts[test], t[train], counts[train],
@@ -643,10 +654,18 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
             totals.append(total)
         return {"fits": fits, "units": units, "totals": totals}
 
-    # The sinusoid of each fold starts at that of the whole log.
+    def evaluate(harmonics, effects, base):
+        return scored(parallel.map_forked(_fold_fit, fold_jobs(harmonics, effects, base),
+                                          threads))
+
+    # The sinusoid of each fold starts at that of the whole log, every other model's at the
+    # fold's sinusoid.
     sine = evaluate((), (), [full["sinusoid"], full["sinusoid"]])
-    results = {model_label(*c): (c, evaluate(*c, sine["fits"]) if c != ((), ()) else sine)
-               for c in candidates}
+    others = [c for c in candidates if c != ((), ())]
+    fits = parallel.map_forked(_fold_fit, [job for c in others
+                                           for job in fold_jobs(*c, sine["fits"])], threads)
+    results = {"sinusoid": (((), ()), sine)} | {
+        model_label(*c): (c, scored(fits[2 * i:2 * i + 2])) for i, c in enumerate(others)}
 
     def score(res, ref):
         n_fold = [min(len(a), len(b)) for a, b in zip(res["units"], ref["units"])]
@@ -659,9 +678,8 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
 
     def full_fit(label, harmonics, effects):
         if label not in full:
-            full[label] = lrde_fit.map_fit(t, counts, step, harmonics=harmonics,
-                                           effects=effects, start=full["sinusoid"]["x"],
-                                           init=init, **fit_kwargs)
+            full[label] = _full_fit(t, counts, step, harmonics, effects,
+                                    full["sinusoid"]["x"], init, fit_kwargs)
         if "log_lik_blurred" not in full[label]:
             full[label]["log_lik_blurred"] = _blurred_log_lik(full[label], t, counts)
         return full[label]
@@ -683,6 +701,11 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
     passing = [m for m in models[1:] if m["z"] is not None and m["z"] > min_z
                and min(m["delta_elpd_halves"]) > 0]
     sine_ll = full_fit("sinusoid", (), ())["log_lik_blurred"]
+    todo = [m for m in passing if m["label"] not in full]
+    done = parallel.map_forked(_full_fit, [(t, counts, step, tuple(m["harmonics"]),
+                                            tuple(m["effects"]), full["sinusoid"]["x"], init,
+                                            fit_kwargs) for m in todo], threads)
+    full |= {m["label"]: fm for m, fm in zip(todo, done)}
     for m in passing:
         fm = full_fit(m["label"], tuple(m["harmonics"]), tuple(m["effects"]))
         m["delta_bic"] = float(2.0 * (fm["log_lik_blurred"] - sine_ll)
@@ -753,9 +776,12 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
     chosen_h, chosen_e = tuple(best["harmonics"]), tuple(best["effects"])
     if best["label"] != "sinusoid":
         full_fit(best["label"], chosen_h, chosen_e)
-    for label in indistinguishable + not_ruled_out:
-        (h, e), _ = results[label]
-        full_fit(label, h, e)
+    todo = [label for label in dict.fromkeys(indistinguishable + not_ruled_out)
+            if label not in full]
+    done = parallel.map_forked(_full_fit, [(t, counts, step, *results[label][0],
+                                            full["sinusoid"]["x"], init, fit_kwargs)
+                                           for label in todo], threads)
+    full |= dict(zip(todo, done))
     return {"models": models, "chosen": best["label"], "chosen_harmonics": list(chosen_h),
             "chosen_effects": list(chosen_e), "delta_bic": best["delta_bic"],
             "indistinguishable": indistinguishable, "not_ruled_out": not_ruled_out,

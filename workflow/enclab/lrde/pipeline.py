@@ -40,13 +40,12 @@ its terms (``model.reference``).
 """
 from __future__ import annotations
 
-import concurrent.futures
 import logging
-import multiprocessing as mp
 
 import numpy as np
 import pandas as pd
 
+from enclab.core import parallel
 from enclab.lrde import compare, dwell, fit, plots, report
 from enclab.lrde import effects as lrde_effects
 
@@ -77,7 +76,7 @@ def _sampler_settings(settings: dict) -> dict:
             "sigma_prior": settings.get("sigma_prior", "uniform")}
 
 
-def _compare_effects(t, counts, step, seed, settings) -> tuple:
+def _compare_effects(t, counts, step, seed, settings, threads=1) -> tuple:
     """The effect comparison's block and the comparison itself (None when not run)."""
     harmonics = [tuple(c) for c in settings.get("motion_models", [[], [2], [3]])]
     names = lrde_effects.check_effects(settings.get("effects", lrde_effects.EFFECTS))
@@ -92,7 +91,7 @@ def _compare_effects(t, counts, step, seed, settings) -> tuple:
             trust_z=float(settings.get("trust_z", compare.DEFAULT_TRUST_Z)),
             local_z=float(settings.get("local_z", compare.DEFAULT_LOCAL_Z)),
             sigma_range=settings.get("sigma_range_steps"),
-            sigma_prior=settings.get("sigma_prior", "uniform"))
+            sigma_prior=settings.get("sigma_prior", "uniform"), threads=threads)
     except ValueError as err:
         _log.warning("effects not compared: %s", err)
         return report.effect_model_block(None, reason=str(err)), None
@@ -104,17 +103,8 @@ def _fit(t, counts, step, seed, kwargs):
 
 
 def _run_fits(t, counts, step, jobs, threads):
-    """The emcee fits of ``jobs`` (``(seed, kwargs)`` each), in order; with ``threads >= 2``
-    all but the last run in forked worker processes beside it."""
-    if len(jobs) < 2 or threads < 2 or "fork" not in mp.get_all_start_methods():
-        return [_fit(t, counts, step, *job) for job in jobs]
-    with concurrent.futures.ProcessPoolExecutor(
-            max_workers=min(threads - 1, len(jobs) - 1),
-            mp_context=mp.get_context("fork")) as pool:
-        # The last fit (the chosen, richest model) stays in this process.
-        pending = [pool.submit(_fit, t, counts, step, *job) for job in jobs[:-1]]
-        last = _fit(t, counts, step, *jobs[-1])
-        return [p.result() for p in pending] + [last]
+    """The emcee fits of ``jobs`` (``(seed, kwargs)`` each), in order, ``threads`` at a time."""
+    return parallel.map_forked(_fit, [(t, counts, step, *job) for job in jobs], threads)
 
 
 def _alternative_kwargs(t, counts, step, comparison, added, common, settings):
@@ -212,9 +202,10 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
         names enter the final fit even when the held-out comparison did not choose them, and
         the report sets each term of the fit against the reference (``model.reference``).
     threads : int
-        Processes for the two emcee fits: with 2 or more, the paper's sinusoid (``before``)
-        and the final model (``after``) are sampled at the same time (they depend only on
-        the comparison and their own seeds, so the results are the same as with 1).
+        Processes for the comparison's point fits and the emcee fits: with 2 or more, the
+        candidates' fits run side by side, and so do the paper's sinusoid (``before``), the
+        final model (``after``) and the pooled alternatives (each depends only on the
+        comparison and its own seed, so the results are the same as with 1).
 
     Returns
     -------
@@ -244,7 +235,8 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
     fit_seed, ppc_seed, compare_seed, after_seed, alternatives_seed = root.spawn(5)
     # The comparison first: its point fit of the sinusoid starts the ensembles near the
     # posterior, so that a short burn-in suffices.
-    model_block, comparison = _compare_effects(t, counts, step, compare_seed, settings)
+    model_block, comparison = _compare_effects(t, counts, step, compare_seed, settings,
+                                                 threads)
     reference = (references or {}).get(info["measured"]) if info["measured"] else None
     harmonics = tuple(comparison["chosen_harmonics"]) if comparison else ()
     chosen = tuple(comparison["chosen_effects"]) if comparison else ()

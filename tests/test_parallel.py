@@ -1,0 +1,36 @@
+"""Jobs of one rule side by side in forked workers (enclab.core.parallel)."""
+import os
+
+import numpy as np
+import pytest
+
+from enclab.core import parallel
+
+
+def _square_and_pid(x):
+    return x * x, os.getpid()
+
+
+def _fail_on_three(x):
+    if x == 3:
+        raise ValueError(f"job {x} failed")
+    return x
+
+
+def test_results_come_back_in_job_order_from_several_workers():
+    jobs = [(np.float64(x),) for x in range(8)]
+    serial = parallel.map_forked(_square_and_pid, jobs, 1)
+    forked = parallel.map_forked(_square_and_pid, jobs, 2)
+    assert [r for r, _ in forked] == [r for r, _ in serial] == [x * x for x in range(8)]
+    assert {pid for _, pid in serial} == {os.getpid()}
+    assert os.getpid() not in {pid for _, pid in forked}
+
+
+def test_a_failing_job_raises_its_own_error_in_the_caller():
+    with pytest.raises(ValueError, match="job 3 failed"):
+        parallel.map_forked(_fail_on_three, [(x,) for x in range(6)], 2)
+
+
+def test_one_job_or_one_process_runs_here():
+    assert parallel.map_forked(_square_and_pid, [(2,)], 4) == [(4, os.getpid())]
+    assert parallel.map_forked(_square_and_pid, [], 4) == []

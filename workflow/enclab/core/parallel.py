@@ -1,0 +1,31 @@
+"""Independent CPU-bound jobs of one rule on the cores the rule was given."""
+from __future__ import annotations
+
+import concurrent.futures
+import multiprocessing as mp
+from typing import Any, Callable, Sequence
+
+
+def map_forked(fn: Callable[..., Any], jobs: Sequence[tuple], processes: int) -> list:
+    """``[fn(*job) for job in jobs]``, with up to ``processes`` jobs at a time.
+
+    The jobs go to ``processes`` forked workers in order, each taking the next job when it
+    is done (the caller waits, so it holds no core of its own); forked workers start at once
+    and see the caller's modules without importing them again. With one process, one job or
+    no ``fork`` (Windows), the jobs run here in order. The results are the same in every case
+    when ``fn`` is deterministic; an exception of a job is raised here after the jobs not yet
+    started are cancelled. Only work that uses numpy, scipy and the standard library belongs
+    here: a forked worker must not touch a thread pool of the parent (Arrow's, for one).
+    """
+    jobs = list(jobs)
+    if len(jobs) < 2 or processes < 2 or "fork" not in mp.get_all_start_methods():
+        return [fn(*job) for job in jobs]
+    with concurrent.futures.ProcessPoolExecutor(
+            max_workers=min(processes, len(jobs)), mp_context=mp.get_context("fork")) as pool:
+        pending = [pool.submit(fn, *job) for job in jobs]
+        try:
+            return [future.result() for future in pending]
+        except BaseException:
+            for future in pending:
+                future.cancel()
+            raise
