@@ -62,7 +62,10 @@ TABLES = [
      "Hysteresis logs with a fine channel: named by the comparison alone and with the residual "
      "stage's findings, coverage of A12, E_b, a and b before and after (`lrde_truth_loop.py`)."),
     ("lrde_stage.csv", "Low-resolution encoder: stage cost",
-     "Wall time of the whole LRDE stage of the embedded logs (`bench_lrde_stage.py`; target 30 s)."),
+     "Wall time of the whole LRDE stage of the embedded logs (`bench_lrde_stage.py`; target 30 s "
+     "on 2 cores; `threads` is the stage's processes, 2 in the workflow)."),
+    ("lrde_stage_earlier.csv", "Low-resolution encoder: stage cost of earlier versions",
+     "The same benchmark on earlier versions of the package, one process each."),
     ("lrde_interval.csv", "Low-resolution encoder: interval probabilities",
      "Cost of the likelihood's interval probabilities, near entries gathered by kind or every "
      "entry in place, by position noise (`bench_lrde_interval.py`)."),
