@@ -664,7 +664,7 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
     others = [c for c in candidates if c != ((), ())]
     fits = parallel.map_forked(_fold_fit, [job for c in others
                                            for job in fold_jobs(*c, sine["fits"])], threads)
-    results = {"sinusoid": (((), ()), sine)} | {
+    results = {model_label((), ()): (((), ()), sine)} | {
         model_label(*c): (c, scored(fits[2 * i:2 * i + 2])) for i, c in enumerate(others)}
 
     def score(res, ref):
