@@ -55,6 +55,9 @@ TABLES = [
      "describes (flagged, placed on the covariate where they act, or misnamed; "
      "`lrde_misfit_trace.py`). Rows with `flagged_headed_by_dwells` empty are of a check "
      "without the dwell rows; runs with the same command use the same seeds."),
+    ("lrde_min_gain.csv", "Low-resolution encoder: which small gains to pool",
+     "Coverage of the 90 % intervals after, when models not ruled out beside a kept sinusoid "
+     "are pooled from a held-out gain of `min_gain` nats on (`lrde_min_gain.py`)."),
     ("lrde_calibration.csv", "Low-resolution encoder: the posterior's own calibration",
      "Coverage of the 90 % intervals when the true model is fitted (no comparison, no pooling), "
      "and of E_b's posterior with every other parameter at the truth (`lrde_calibration.py`)."),
