@@ -676,10 +676,16 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
         halves_gain = [float(a - b) for a, b in zip(res["totals"], ref["totals"])]
         return delta, se, halves_gain, diff.size
 
+    def full_fits(terms):
+        """The whole-log fits of ``terms`` (label -> (harmonics, effects)) not yet made,
+        side by side."""
+        todo = {label: he for label, he in terms.items() if label not in full}
+        full.update(zip(todo, parallel.map_forked(
+            _full_fit, [(t, counts, step, *he, full["sinusoid"]["x"], init, fit_kwargs)
+                        for he in todo.values()], threads)))
+
     def full_fit(label, harmonics, effects):
-        if label not in full:
-            full[label] = _full_fit(t, counts, step, harmonics, effects,
-                                    full["sinusoid"]["x"], init, fit_kwargs)
+        full_fits({label: (harmonics, effects)})
         if "log_lik_blurred" not in full[label]:
             full[label]["log_lik_blurred"] = _blurred_log_lik(full[label], t, counts)
         return full[label]
@@ -701,11 +707,7 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
     passing = [m for m in models[1:] if m["z"] is not None and m["z"] > min_z
                and min(m["delta_elpd_halves"]) > 0]
     sine_ll = full_fit("sinusoid", (), ())["log_lik_blurred"]
-    todo = [m for m in passing if m["label"] not in full]
-    done = parallel.map_forked(_full_fit, [(t, counts, step, tuple(m["harmonics"]),
-                                            tuple(m["effects"]), full["sinusoid"]["x"], init,
-                                            fit_kwargs) for m in todo], threads)
-    full |= {m["label"]: fm for m, fm in zip(todo, done)}
+    full_fits({m["label"]: (tuple(m["harmonics"]), tuple(m["effects"])) for m in passing})
     for m in passing:
         fm = full_fit(m["label"], tuple(m["harmonics"]), tuple(m["effects"]))
         m["delta_bic"] = float(2.0 * (fm["log_lik_blurred"] - sine_ll)
@@ -774,14 +776,7 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
     check |= {"trusted": bool(check["z"] >= trust_z and not localized), "threshold_z": trust_z,
               "localized": localized, "local_z": local_z, "trace": trace}
     chosen_h, chosen_e = tuple(best["harmonics"]), tuple(best["effects"])
-    if best["label"] != "sinusoid":
-        full_fit(best["label"], chosen_h, chosen_e)
-    todo = [label for label in dict.fromkeys(indistinguishable + not_ruled_out)
-            if label not in full]
-    done = parallel.map_forked(_full_fit, [(t, counts, step, *results[label][0],
-                                            full["sinusoid"]["x"], init, fit_kwargs)
-                                           for label in todo], threads)
-    full |= dict(zip(todo, done))
+    full_fits({label: results[label][0] for label in indistinguishable + not_ruled_out})
     return {"models": models, "chosen": best["label"], "chosen_harmonics": list(chosen_h),
             "chosen_effects": list(chosen_e), "delta_bic": best["delta_bic"],
             "indistinguishable": indistinguishable, "not_ruled_out": not_ruled_out,
