@@ -17,6 +17,7 @@ Usage::
     .venv/bin/python workflow/benchmarks/bench_first_run.py
     .venv/bin/python workflow/benchmarks/bench_first_run.py --commit 40d78c3 --test
     .venv/bin/python workflow/benchmarks/bench_first_run.py --quick   # 4 logs, ~1 CPU-minute
+    .venv/bin/python workflow/benchmarks/bench_first_run.py --smk-args '--set-threads lrde_fit=1'
 """
 from __future__ import annotations
 
@@ -60,7 +61,8 @@ def _snakemake_span(clone: Path) -> tuple[float | None, int | None]:
     return span, int(jobs.group(1)) if jobs else None
 
 
-def measure(repo: Path, commit: str, target: str, quick: bool, keep: bool) -> dict:
+def measure(repo: Path, commit: str, target: str, quick: bool, keep: bool,
+            smk_args: str = "") -> dict:
     work = Path(tempfile.mkdtemp(prefix="enclab-first-run-"))
     clone = work / "clone"
     subprocess.run(["git", "clone", "-q", str(repo), str(clone)], check=True)
@@ -70,6 +72,8 @@ def measure(repo: Path, commit: str, target: str, quick: bool, keep: bool) -> di
     command = ["make", target]
     if quick and target == "run":
         command.append(f"CONFIG=only_logs={QUICK_LOGS}")
+    if smk_args and target == "run":
+        command.append(f"SMK_ARGS={smk_args}")
     load_start, start = _load(), time.time()
     with open(work / f"make_{target}.out", "w") as out:
         done = subprocess.run(command, cwd=clone, stdout=out, stderr=subprocess.STDOUT)
@@ -104,9 +108,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--test", action="store_true", help="also time make test (a fresh clone too)")
     parser.add_argument("--quick", action="store_true", help="4 logs instead of 72")
     parser.add_argument("--keep", action="store_true", help="keep the clone")
+    parser.add_argument("--smk-args", default="", metavar="ARGS",
+                        help="extra Snakemake arguments of make run (SMK_ARGS), e.g. "
+                             "'--set-threads lrde_fit=1'")
     parser.add_argument("--out", type=Path, default=ROOT / "results/benchmarks/first_run.csv")
     args = parser.parse_args(argv)
-    rows = [measure(args.repo, args.commit, "run", args.quick, args.keep)]
+    rows = [measure(args.repo, args.commit, "run", args.quick, args.keep, args.smk_args)]
     if args.test:
         rows.append(measure(args.repo, args.commit, "test", False, args.keep))
     args.out.parent.mkdir(parents=True, exist_ok=True)
