@@ -124,6 +124,23 @@ def test_effect_comparison_names_hysteresis_and_keeps_the_sinusoid_on_a_clean_lo
             continue
         within = abs(m["delta_over_chosen"]) < 2.0 * m["se_over_chosen"]
         assert within == (m["label"] in out["indistinguishable"])
+    # The bar: held-out z above 2 and no fold significantly worse; only such models reach
+    # the full-log delta BIC.
+    for m in out["models"][1:]:
+        bar = (m["z"] is not None and m["z"] > 2.0
+               and compare._no_fold_worse(m["delta_elpd_halves"], m["delta_se_halves"]))
+        assert (m["delta_bic"] is not None) == bar
+
+
+def test_a_fold_may_lose_within_its_own_standard_errors():
+    # A clear gain on one fold and a loss on the other within two of that fold's standard
+    # errors: the point fit on half the cycles misplaces edges; no evidence against the model.
+    assert compare._no_fold_worse([60.1, -4.7], [6.7, 11.2])
+    assert not compare._no_fold_worse([60.1, -30.0], [6.7, 11.2])
+    assert compare._no_fold_worse([1.0, 2.0], [0.0, 0.0])
+    assert not compare._no_fold_worse([1.0, 0.0], [0.5, 0.0])  # no spread: any loss counts
+    assert compare._sum_se(np.array([1.0, 3.0])) == pytest.approx(2.0)
+    assert compare._sum_se(np.array([1.0])) == np.inf
 
 
 def test_full_log_score_is_the_held_out_score_summed_over_the_log():
