@@ -15,7 +15,7 @@ fold, with each fold's gain and standard error.
 
 Usage::
 
-    python workflow/benchmarks/lrde_fold_rule.py --cases harmonic hysteresis clean noise --draws 200
+    python workflow/benchmarks/lrde_fold_rule.py --cases harmonic hysteresis clean --draws 200
     python workflow/benchmarks/lrde_fold_rule.py --cases clean --draws 200 --shard 1/2
     python workflow/benchmarks/lrde_fold_rule.py --from-draws a/lrde_fold_rule_draws.csv \\
         b/lrde_fold_rule_draws.csv

@@ -587,8 +587,8 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
     candidate replaces the sinusoid when its summed gain exceeds
     ``min_z`` standard errors of the per-cycle differences, it predicts no fold worse by more
     than ``fold_se`` (default 2) of that fold's standard errors (:func:`_no_fold_worse`; 0:
-    each fold better), and its
-    full-log ``delta_bic = 2 (log L_model - log L_sine) - n_extra ln N`` is positive
+    each fold better), and its full-log ``delta_bic = 2 (log L_model - log L_sine) - n_extra
+    ln N`` is positive
     (``count_jump`` counts as one extra parameter besides its marginalised location); the
     largest ``delta_bic`` wins. The full-log likelihoods carry the held-out score's time blur
     (:func:`_blurred_log_lik`): without it a point fit's position noise collapses, every
@@ -636,13 +636,13 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
     dict
         ``models`` (per candidate: ``label, harmonics, effects, elpd_per_cycle, delta_elpd,
         delta_se, z, delta_elpd_halves, delta_se_halves, delta_bic`` (the ``_halves`` are per
-        fold), and for alternatives to a chosen effect ``delta_over_chosen, se_over_chosen``), ``chosen`` (label), ``chosen_harmonics``,
-        ``chosen_effects``, ``indistinguishable`` and ``not_ruled_out`` (labels), ``check``
-        ``{z, observed, sim_mean, sim_sd, trusted}``, ``n_cycles``, ``rule``, ``full_fits``
-        (label -> point fit of the whole log; the sinusoid, every model tried on the full log,
-        the chosen one and each one listed in ``indistinguishable`` or ``not_ruled_out``) and
-        ``trace_detail`` (the localized check's bins and dwells, see :func:`misfit_trace`;
-        ``check["trace"]`` holds the rest).
+        fold), and for alternatives to a chosen effect ``delta_over_chosen, se_over_chosen``),
+        ``chosen`` (label), ``chosen_harmonics``, ``chosen_effects``, ``indistinguishable``
+        and ``not_ruled_out`` (labels), ``check`` ``{z, observed, sim_mean, sim_sd, trusted}``,
+        ``n_cycles``, ``rule``, ``full_fits`` (label -> point fit of the whole log; the
+        sinusoid, every model tried on the full log, the chosen one and each one listed in
+        ``indistinguishable`` or ``not_ruled_out``) and ``trace_detail`` (the localized check's
+        bins and dwells, see :func:`misfit_trace`; ``check["trace"]`` holds the rest).
     """
     t = np.asarray(t, dtype=float)
     counts = np.asarray(counts)
@@ -692,8 +692,8 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
 
     def score(res, ref):
         """``(delta, se, per-fold gains, per-fold se, units)`` of ``res`` over ``ref``."""
-        diffs = [a[:n] - b[:n] for a, b in zip(res["units"], ref["units"])
-                 for n in (min(len(a), len(b)),)]
+        n_fold = [min(len(a), len(b)) for a, b in zip(res["units"], ref["units"])]
+        diffs = [a[:n] - b[:n] for a, b, n in zip(res["units"], ref["units"], n_fold)]
         diff = np.concatenate(diffs)
         delta = float(sum(res["totals"]) - sum(ref["totals"]))
         halves_gain = [float(a - b) for a, b in zip(res["totals"], ref["totals"])]
