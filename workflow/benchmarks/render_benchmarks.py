@@ -58,6 +58,10 @@ TABLES = [
     ("lrde_min_gain.csv", "Low-resolution encoder: which small gains to pool",
      "Coverage of the 90 % intervals after, when models not ruled out beside a kept sinusoid "
      "are pooled from a held-out gain of `min_gain` nats on (`lrde_min_gain.py`)."),
+    ("lrde_fold_rule.csv", "Low-resolution encoder: the comparison's fold test",
+     "Named rates when a model may predict a fold worse within `fold_se` of that fold's "
+     "standard errors (2, the stage's) or not at all (0), on the effects benchmark's logs; "
+     "the draws whose choice differs (`lrde_fold_rule.py`)."),
     ("lrde_calibration.csv", "Low-resolution encoder: the posterior's own calibration",
      "Coverage of the 90 % intervals when the true model is fitted (no comparison, no pooling), "
      "and of E_b's posterior with every other parameter at the truth (`lrde_calibration.py`)."),
