@@ -60,6 +60,16 @@ def test_lrde_entry_with_counts_step_truth_and_rate():
     assert entry["analysis"] == {"stages": ["lrde"]}
 
 
+def test_the_one_file_workspace_runs_no_design_mode(tmp_path):
+    # design mode answers the project's error budget, not a question about one file
+    args = _args("residuals", "/data/rig.csv", "--truth", "a", "--measured", "b")
+    cli._write_workspace(cli.build_entry("residuals", args), Path("/data"), tmp_path,
+                         cli.ROOT / "config.yaml")
+    config = yaml.safe_load((tmp_path / "config.yaml").read_text())
+    assert "design" not in config and config["manifest"] == "manifest.yaml"
+    assert yaml.safe_load((cli.ROOT / "config.yaml").read_text())["design"]
+
+
 def test_sample_index_time_needs_the_rate():
     args = _args("residuals", "x.csv", "--truth", "a", "--measured", "b", "--time", "k",
                  "--time-unit", "samples", "--rate", "500")

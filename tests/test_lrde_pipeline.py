@@ -350,3 +350,28 @@ def test_an_effect_the_kept_sinusoid_does_not_rule_out_is_pooled_with_it():
     assert "keeps the sinusoid but does not rule the others out" in md
     assert "the paper's model stands" not in md
     json.dumps(block)
+
+
+def test_a_count_glitch_fails_with_the_file_the_column_and_the_time():
+    df, meta, _ = _canonical()
+    meta = dict(meta, source={"file": "rig/run3.csv"})
+    glitched = df.copy()
+    row = len(df) // 2
+    glitched.loc[row, "coarse"] += 30
+    with pytest.raises(ValueError, match=rf"^rig/run3\.csv: column 'coarse', sample {row} "
+                                         r"\(t = [0-9.]+ s\): the count changes by \+30 in one "
+                                         r"sample .*\(and 1 more such changes\).*crop"):
+        pipeline.analyse_lrde_log(glitched, meta, seed=1, settings=FAST)
+    # Two counts in one sample are accepted (an analog sensor's toggling levels do that).
+    t = np.arange(6) / 1000.0
+    pipeline.check_count_changes(t, np.array([0, 2, 0, 1, 3, 3]), "x")
+    with pytest.raises(ValueError, match=r"^x, sample 2 \(t = 0\.002 s\): the count changes by -3"):
+        pipeline.check_count_changes(t, np.array([0, 1, -2, -1, 0, 0]), "x")
+
+
+def test_readings_too_short_to_fit_name_the_file_and_the_column():
+    df, meta, _ = _canonical()
+    meta = dict(meta, source={"file": "rig/run3.csv"})
+    with pytest.raises(ValueError, match=r"^rig/run3\.csv: column 'coarse': .*no complete "
+                                         r"oscillation cycle"):
+        pipeline.analyse_lrde_log(df.iloc[:40], meta, seed=1, settings=FAST)

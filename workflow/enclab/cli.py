@@ -127,6 +127,8 @@ def _write_workspace(entry: dict, data_root: Path, out: Path, configfile: Path) 
     config = yaml.safe_load(configfile.read_text(encoding="utf-8"))
     config["manifest"] = "manifest.yaml"
     config["only_logs"] = []
+    # Design mode answers the project's error budget, not a question about this file.
+    config.pop("design", None)
     manifest = {"data_root": str(data_root), "logs": [entry]}
     # the entry is checked here, before Snakemake starts
     validate_manifest(manifest, config.get("devices") or {}, f"enclab {entry['id']}")

@@ -181,6 +181,32 @@ def select_channels(df: pd.DataFrame, meta: dict, settings: dict):
                                  "requantized": True, "truth_step": truth_step}
 
 
+#: Largest change of the coarse count between two samples that the dwell-pattern fit accepts:
+#: one step of motion plus a missed or extra count (an analog sensor's levels toggle by 2).
+MAX_COUNT_CHANGE = 2
+
+
+def check_count_changes(t, counts, where: str) -> None:
+    """Raise a one-line error at the first sample whose count differs from the previous one by
+    more than :data:`MAX_COUNT_CHANGE`.
+
+    The dwell pattern assumes that the motion moves less than a step per sample; a larger
+    change is a glitch, a gap in the log or a channel that is not a low-resolution reading,
+    and would otherwise end as an untrusted fit that blames the wrong cause.
+    """
+    change = np.diff(np.asarray(counts, dtype=np.int64))
+    bad = np.flatnonzero(np.abs(change) > MAX_COUNT_CHANGE)
+    if bad.size:
+        i = int(bad[0]) + 1
+        more = f" (and {bad.size - 1} more such changes)" if bad.size > 1 else ""
+        raise ValueError(
+            f"{where}, sample {i} (t = {t[i]:.6g} s): the count changes by {int(change[i - 1]):+d} "
+            f"in one sample ({int(counts[i - 1])} -> {int(counts[i])}){more}; the dwell-pattern "
+            f"fit needs the motion to move less than a step per sample (at most "
+            f"{MAX_COUNT_CHANGE} counts between samples): a glitch or a gap in the log? Fix the "
+            "file or crop the log to exclude it (crop: t_start/t_end).")
+
+
 def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
                      references: dict | None = None, threads: int = 1):
     """Dwell baselines and the Bayesian fit of one canonical log.
@@ -228,15 +254,22 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
                          f"{sorted(_KNOWN_SETTINGS)}")
     t = df["t"].to_numpy(dtype=float)
     counts, step, truth, info = select_channels(df, meta, settings)
+    source = (meta.get("source") or {}).get("file") or meta.get("log_id") or "the log"
+    where = (f"{source}: column {info['measured']!r}" if info["measured"] else
+             f"{source}: column {info['truth']!r} re-quantized")
+    check_count_changes(t, counts, where)
     f_hz = settings.get("f_hz")
-    cycles = dwell.cycle_table(counts, t, step, f_hz=f_hz)
-    summary = dwell.dwell_summary(cycles)
     root = np.random.SeedSequence(seed)
     fit_seed, ppc_seed, compare_seed, after_seed, alternatives_seed = root.spawn(5)
-    # The comparison first: its point fit of the sinusoid starts the ensembles near the
-    # posterior, so that a short burn-in suffices.
-    model_block, comparison = _compare_effects(t, counts, step, compare_seed, settings,
-                                                 threads)
+    try:
+        cycles = dwell.cycle_table(counts, t, step, f_hz=f_hz)
+        summary = dwell.dwell_summary(cycles)
+        # The comparison first: its point fit of the sinusoid starts the ensembles near the
+        # posterior, so that a short burn-in suffices.
+        model_block, comparison = _compare_effects(t, counts, step, compare_seed, settings,
+                                                     threads)
+    except ValueError as err:  # what in these readings stops the fit, and where they are
+        raise ValueError(f"{where}: {err}") from err
     reference = (references or {}).get(info["measured"]) if info["measured"] else None
     harmonics = tuple(comparison["chosen_harmonics"]) if comparison else ()
     chosen = tuple(comparison["chosen_effects"]) if comparison else ()
@@ -266,7 +299,10 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
         after_kw = {"harmonics": harmonics, "effects": chosen + tuple(added),
                     "start": point["x"], **common}
         jobs.append((after_seed, after_kw))
-    fits = _run_fits(t, counts, step, jobs, threads)
+    try:
+        fits = _run_fits(t, counts, step, jobs, threads)
+    except ValueError as err:
+        raise ValueError(f"{where}: {err}") from err
     result = fits[0]
     chosen_fit = fits[-1] if after_kw is not None else None
     # Models the held-out comparison cannot tell from the pick (or, when it keeps the
