@@ -202,6 +202,20 @@ def _pair_in_ms(root: Path, log_id: str) -> dict:
                          {"name": "measured", "column": "measured", "role": "measured", "joint": 1}]}
 
 
+def _lrde_glitch(root: Path, log_id: str) -> dict:
+    """A low-resolution log (paper 002) whose count leaps by 38 for one sample: a glitch."""
+    t = np.arange(N) / FS
+    counts = np.floor(1.8 * np.sin(2 * np.pi * 20.0 * t) + 0.3).astype(np.int64)
+    counts[1000] += 38
+    path = root / f"{log_id}.csv"
+    pd.DataFrame({"t": t, "counts": counts}).to_csv(path, index=False, float_format="%.17g")
+    return {"id": log_id, "file": path.name, "format": "csv", "device": "lrde_axis",
+            "time": {"column": "t", "unit": "s"},
+            "channels": [{"name": "coarse", "column": "counts", "role": "measured", "joint": 1,
+                          "unit": "counts", "step": 0.0015707963267948964}],
+            "analysis": {"stages": ["lrde"]}}
+
+
 def _deg_as_rad(table):
     return table.assign(angle=np.rad2deg(table["angle"]) * 20)
 
@@ -257,6 +271,9 @@ CASES: list[Case] = [
          _csv_case(lambda t: t, _with(file="no_such_log.csv")), ["no_such_log.csv", "not found"]),
     Case("never_moves", "a joint that never moves", _csv_case(_never_moves),
          ["never_moves.csv", "'angle'", "never moves"]),
+    Case("lrde_count_glitch", "a low-resolution log whose count leaps by 38 for one sample",
+         _lrde_glitch, ["lrde_count_glitch.csv", "'coarse'", "sample 1000", "t = 1 s", "+38"],
+         stage="lrde_fit"),
     # files as labs have them: each form is read when declared, or names the key to set
     Case("latin1_header", "a Latin-1 degree sign in the header (a Windows logger)",
          _bytes_case(_latin1_header, entry_mut=_with(**{"channels.0.column": "angle [\u00b0]"})),

@@ -89,7 +89,7 @@ def checksums(folder: Path) -> dict[str, str]:
 
 STAGE_OUTPUTS = {"ingest": "canonical.parquet", "requantize": "requantized.parquet",
                  "kinematics": "kinematics.parquet", "derivatives": "derivatives.parquet",
-                 "moments": "moments.json", "theory": "theory.json"}
+                 "moments": "moments.json", "theory": "theory.json", "lrde_fit": "lrde/lrde.json"}
 
 
 def _log_outcome(work: Path, case: Case) -> Outcome:
