@@ -197,6 +197,62 @@ def one_draw(case, n_cycles, seed, sampler):
     return row
 
 
+def draw_seed(base, case, cycles, i) -> int:
+    """Seed of draw ``i`` of ``case`` at ``cycles`` cycles. A case's seeds do not depend on
+    which other cases run beside it, so scripts that rerun these logs get the same ones."""
+    return base + 100_000 * CASES.index(case) + 1000 * cycles + i
+
+
+def read_draws(paths) -> pd.DataFrame:
+    """Draws CSVs concatenated; a draw listed again (same cycles, case and seed) takes the
+    later file's row."""
+    draws = pd.concat([pd.read_csv(p) for p in paths], ignore_index=True)
+    return draws.drop_duplicates(["cycles", "case", "seed"], keep="last")
+
+
+def parse_shard(ap, text) -> tuple[int, int]:
+    """``K/N`` of ``--shard`` (an argparse error unless 0 <= K < N)."""
+    k, n = (int(x) for x in text.split("/"))
+    if not 0 <= k < n:
+        ap.error(f"--shard {text}: K must be in 0..N-1")
+    return k, n
+
+
+def add_rerun_arguments(ap, cases) -> None:
+    """The options of a script that reruns this benchmark's logs of one cycle count (same
+    logs and seeds for the same case, cycle count and draw index)."""
+    ap.add_argument("--cases", nargs="+", default=list(cases), choices=CASES)
+    ap.add_argument("--cycles", type=int, default=20)
+    ap.add_argument("--draws", type=int, default=100, help="index of the draw to stop at")
+    ap.add_argument("--first-draw", type=int, default=0)
+    ap.add_argument("--seed", type=int, default=20261202,
+                    help="base seed of bench_lrde_effects.py (same logs for the same draw)")
+    ap.add_argument("--shard", default="0/1", metavar="K/N")
+    ap.add_argument("--out", default=str(ROOT / "results" / "benchmarks"))
+    ap.add_argument("--from-draws", nargs="+", default=None, metavar="CSV",
+                    help="summarise these draws instead of running any")
+
+
+def rerun_draws(ap, args, one, path, show) -> pd.DataFrame:
+    """Run ``one(case, seed)`` on the draws that :func:`add_rerun_arguments` select, or read
+    ``--from-draws``; the rows so far are written to ``path`` after every draw and the keys
+    ``show`` of each printed."""
+    if args.from_draws:
+        draws = read_draws(args.from_draws)
+    else:
+        k, n = parse_shard(ap, args.shard)
+        rows = []
+        for case in args.cases:
+            for i in range(args.first_draw, args.draws):
+                if i % n == k:
+                    rows.append(one(case, draw_seed(args.seed, case, args.cycles, i)))
+                    print({key: rows[-1][key] for key in show}, flush=True)
+                    stamp(pd.DataFrame(rows)).to_csv(path, index=False)
+        draws = stamp(pd.DataFrame(rows))
+    draws.to_csv(path, index=False)
+    return draws
+
+
 def wilson(k, n, z=1.96):
     """Wilson score interval of a binomial proportion ``k / n``."""
     if n == 0:
@@ -367,8 +423,7 @@ def main(argv=None):
     if args.from_draws:
         out = pathlib.Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
-        draws = pd.concat([pd.read_csv(p) for p in args.from_draws], ignore_index=True)
-        draws = draws.drop_duplicates(["cycles", "case", "seed"], keep="last")
+        draws = read_draws(args.from_draws)
         draws.to_csv(out / "lrde_effects_draws.csv", index=False)
         summary = stamp(summarise(draws))
         if args.pool_with:
@@ -385,9 +440,7 @@ def main(argv=None):
                "n_steps": args.n_steps, "n_burn": args.n_burn, "max_steps": args.max_steps}
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    k, n = (int(x) for x in args.shard.split("/"))
-    if not 0 <= k < n:
-        ap.error(f"--shard {args.shard}: K must be in 0..N-1")
+    k, n = parse_shard(ap, args.shard)
     # Interleave cases so that a time budget cuts every case to about the same size.
     tasks = []
     if args.redo:
@@ -399,10 +452,8 @@ def main(argv=None):
         for i in range(args.first_draw, n_max):
             for case in args.cases:
                 n_case = args.clean_draws if case == "clean" else args.draws
-                # A case's seeds do not depend on which other cases run beside it.
-                c_i = CASES.index(case)
                 if i < n_case and i % n == k:
-                    tasks.append((case, cycles, args.seed + 100_000 * c_i + 1000 * cycles + i))
+                    tasks.append((case, cycles, draw_seed(args.seed, case, cycles, i)))
     if not tasks:
         ap.error(f"no draws to run: --first-draw {args.first_draw} is the index of the first draw, "
                  f"--draws {args.draws} and --clean-draws {args.clean_draws} the index to stop at")

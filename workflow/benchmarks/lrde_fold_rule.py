@@ -35,7 +35,7 @@ import numpy as np
 import pandas as pd
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from provenance import ROOT, stamp  # noqa: E402
+from provenance import stamp  # noqa: E402
 
 import bench_lrde_effects as bench  # noqa: E402
 from enclab.core.allocator import keep_freed_memory  # noqa: E402
@@ -97,42 +97,18 @@ def summarise(draws: pd.DataFrame, fold_ses) -> pd.DataFrame:
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--cases", nargs="+", default=["harmonic", "hysteresis", "clean", "noise"],
-                    choices=bench.CASES)
-    ap.add_argument("--cycles", type=int, default=20)
-    ap.add_argument("--draws", type=int, default=100, help="index of the draw to stop at")
-    ap.add_argument("--first-draw", type=int, default=0)
+    bench.add_rerun_arguments(ap, ["harmonic", "hysteresis", "clean", "noise"])
     ap.add_argument("--fold-se", type=float, nargs="+", default=list(FOLD_SE),
                     help="values of the fold test; the first is run on every draw")
-    ap.add_argument("--seed", type=int, default=20261202,
-                    help="base seed of bench_lrde_effects.py (same logs for the same draw)")
-    ap.add_argument("--shard", default="0/1", metavar="K/N")
-    ap.add_argument("--out", default=str(ROOT / "results" / "benchmarks"))
-    ap.add_argument("--from-draws", nargs="+", default=None, metavar="CSV",
-                    help="summarise these draws instead of running any")
     args = ap.parse_args(argv)
     keep_freed_memory()
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     fold_ses = list(dict.fromkeys(args.fold_se))
-    if args.from_draws:
-        draws = pd.concat([pd.read_csv(p) for p in args.from_draws], ignore_index=True)
-        draws = draws.drop_duplicates(["cycles", "case", "seed"], keep="last")
-    else:
-        k, n = (int(x) for x in args.shard.split("/"))
-        if not 0 <= k < n:
-            ap.error(f"--shard {args.shard}: K must be in 0..N-1")
-        tasks = [(case, args.seed + 100_000 * bench.CASES.index(case) + 1000 * args.cycles + i)
-                 for case in args.cases for i in range(args.first_draw, args.draws)
-                 if i % n == k]
-        rows = []
-        for case, seed in tasks:
-            rows.append(one_draw(case, args.cycles, seed, fold_ses))
-            print({key: rows[-1][key] for key in ("case", "seed", "size", "split", "wall_s")}
-                  | {f"chosen_{v:g}": rows[-1][f"chosen_{v:g}"] for v in fold_ses}, flush=True)
-            stamp(pd.DataFrame(rows)).to_csv(out / "lrde_fold_rule_draws.csv", index=False)
-        draws = stamp(pd.DataFrame(rows))
-    draws.to_csv(out / "lrde_fold_rule_draws.csv", index=False)
+    draws = bench.rerun_draws(
+        ap, args, lambda case, seed: one_draw(case, args.cycles, seed, fold_ses),
+        out / "lrde_fold_rule_draws.csv",
+        ("case", "seed", "size", "split", "wall_s", *(f"chosen_{v:g}" for v in fold_ses)))
     summary = stamp(summarise(draws, fold_ses))
     summary.to_csv(out / "lrde_fold_rule.csv", index=False)
     with pd.option_context("display.width", 250, "display.max_columns", 40):

@@ -37,7 +37,7 @@ import numpy as np
 import pandas as pd
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from provenance import ROOT, stamp  # noqa: E402
+from provenance import stamp  # noqa: E402
 
 import bench_lrde_effects as bench  # noqa: E402
 from enclab.core.allocator import keep_freed_memory  # noqa: E402
@@ -111,42 +111,19 @@ def summarise(draws: pd.DataFrame, gains) -> pd.DataFrame:
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--cases", nargs="+", default=["harmonic", "clean"], choices=bench.CASES)
-    ap.add_argument("--cycles", type=int, default=20)
-    ap.add_argument("--draws", type=int, default=100, help="index of the draw to stop at")
-    ap.add_argument("--first-draw", type=int, default=0)
+    bench.add_rerun_arguments(ap, ["harmonic", "clean"])
     ap.add_argument("--gains", type=float, nargs="+", default=list(GAINS))
-    ap.add_argument("--seed", type=int, default=20261202,
-                    help="base seed of bench_lrde_effects.py (same logs for the same draw)")
-    ap.add_argument("--shard", default="0/1", metavar="K/N")
-    ap.add_argument("--out", default=str(ROOT / "results" / "benchmarks"))
-    ap.add_argument("--from-draws", nargs="+", default=None, metavar="CSV",
-                    help="summarise these draws instead of running any")
     args = ap.parse_args(argv)
     keep_freed_memory()
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     gains = sorted(set(args.gains), reverse=True)
-    if args.from_draws:
-        draws = pd.concat([pd.read_csv(p) for p in args.from_draws], ignore_index=True)
-        draws = draws.drop_duplicates(["cycles", "case", "seed"], keep="last")
-    else:
-        k, n = (int(x) for x in args.shard.split("/"))
-        if not 0 <= k < n:
-            ap.error(f"--shard {args.shard}: K must be in 0..N-1")
-        sampler = {"n_ensembles": 4, "n_walkers": 16, "n_steps": 250, "n_burn": 100,
-                   "max_steps": 1000}
-        tasks = [(case, args.seed + 100_000 * bench.CASES.index(case) + 1000 * args.cycles + i)
-                 for i in range(args.first_draw, args.draws) for case in args.cases
-                 if i % n == k]
-        rows = []
-        for case, seed in tasks:
-            rows.append(one_draw(case, args.cycles, seed, sampler, gains))
-            print({key: rows[-1][key] for key in ("case", "seed", "size", "chosen",
-                                                  "not_ruled_out", "wall_s")}, flush=True)
-            stamp(pd.DataFrame(rows)).to_csv(out / "lrde_min_gain_draws.csv", index=False)
-        draws = stamp(pd.DataFrame(rows))
-    draws.to_csv(out / "lrde_min_gain_draws.csv", index=False)
+    sampler = {"n_ensembles": 4, "n_walkers": 16, "n_steps": 250, "n_burn": 100,
+               "max_steps": 1000}
+    draws = bench.rerun_draws(
+        ap, args, lambda case, seed: one_draw(case, args.cycles, seed, sampler, gains),
+        out / "lrde_min_gain_draws.csv",
+        ("case", "seed", "size", "chosen", "not_ruled_out", "wall_s"))
     summary = stamp(summarise(draws, gains))
     summary.to_csv(out / "lrde_min_gain.csv", index=False)
     with pd.option_context("display.width", 250, "display.max_columns", 40):
