@@ -116,13 +116,14 @@ def test_effect_comparison_names_hysteresis_and_keeps_the_sinusoid_on_a_clean_lo
     w = out["full_fits"]["hysteresis"]["x"][5]
     assert abs(w - 1 / 6) < 0.03
     # "Not distinguishable" is the paired held-out evidence and nothing else: exactly the
-    # other candidates that beat the sinusoid on each fold and lie within two standard errors.
+    # other candidates that beat the sinusoid on each fold and score no more than two standard
+    # errors below the pick.
     for m in out["models"]:
         if (m["label"] in ("sinusoid", "hysteresis") or min(m["delta_elpd_halves"]) <= 0
                 or "hysteresis" in m["label"].split("+")):
             assert m["label"] not in out["indistinguishable"]
             continue
-        within = abs(m["delta_over_chosen"]) < 2.0 * m["se_over_chosen"]
+        within = m["delta_over_chosen"] > -2.0 * m["se_over_chosen"]
         assert within == (m["label"] in out["indistinguishable"])
     # The bar: held-out z above 2 and no fold significantly worse; only such models reach
     # the full-log delta BIC.
@@ -130,6 +131,26 @@ def test_effect_comparison_names_hysteresis_and_keeps_the_sinusoid_on_a_clean_lo
         bar = (m["z"] is not None and m["z"] > 2.0
                and compare._no_fold_worse(m["delta_elpd_halves"], m["delta_se_halves"]))
         assert (m["delta_bic"] is not None) == bar
+
+
+def test_a_model_predicting_better_than_the_pick_is_not_distinguishable_from_it():
+    # A 3rd harmonic of 0.052 step over 20 cycles that the full-log BIC gives to a dead band
+    # (one parameter against the harmonic's two), while the harmonic predicts the held-out
+    # cycles better by more than two standard errors: the criteria disagree, so the harmonic
+    # is listed beside the pick.
+    from enclab.lrde import effects
+
+    f_hz = 20.189805895232706
+    t = np.arange(int(np.floor(21 * 2000.0 / f_hz))) / 2000.0
+    c = effects.simulate_counts(np.random.default_rng(4), t, STEP, 4.698 * STEP, 0.431 * STEP,
+                                f_hz, 0.7476, noise_std=0.005 * STEP,
+                                harmonics={3: (0.05186 * STEP, 0.00088 * STEP)})
+    out = compare.compare_effect_models(t, c, STEP, 1, candidates=[
+        ((), ()), ((3,), ()), ((), ("hysteresis",))], pairs=False)
+    assert out["chosen"] == "hysteresis"
+    harmonic = {m["label"]: m for m in out["models"]}["harmonic3"]
+    assert harmonic["delta_over_chosen"] > 2.0 * harmonic["se_over_chosen"]
+    assert out["indistinguishable"] == ["harmonic3"]
 
 
 def test_a_fold_may_lose_within_its_own_standard_errors():

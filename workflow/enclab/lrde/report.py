@@ -214,8 +214,8 @@ def effect_model_block(comparison: dict | None, chosen_fit=None, reason: str | N
                      f"weights ('after' is {out['chosen']} alone)")
         if out["indistinguishable"]:
             out["note"] = (f"{out['chosen']} is not distinguishable from "
-                           f"{', '.join(out['indistinguishable'])} on held-out cycles (within "
-                           f"two standard errors); {which}")
+                           f"{', '.join(out['indistinguishable'])} on held-out cycles (no more "
+                           f"than two standard errors below it, or better); {which}")
         else:
             out["note"] = (f"no effect clears the rule, but {', '.join(out['not_ruled_out'])} "
                            f"predict{'s' if len(out['not_ruled_out']) == 1 else ''} each "
