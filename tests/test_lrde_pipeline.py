@@ -307,7 +307,7 @@ def _harmonic_log(seed, n_cycles=12):
 @pytest.mark.slow
 def test_models_the_comparison_cannot_tell_apart_are_pooled_in_the_reported_estimates():
     """A 3rd harmonic of 0.02 step that the comparison takes for a dead band, with the
-    harmonic within two standard errors of it: both models are fitted and the headline estimates
+    harmonic within two standard errors: both models are fitted and the headline estimates
     are their equal-weight pool, while ``after`` stays the pick's own posterior."""
     df, meta = _harmonic_log(25)
     settings = dict(FAST, motion_models=[[], [3]], effects=["hysteresis"], effect_pairs=False)

@@ -784,7 +784,8 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
                          and m["delta_elpd"] >= min_gain]
     for m in models if best["label"] != "sinusoid" else ():
         # An alternative explanation: it predicts each fold better than the sinusoid too,
-        # and its held-out score is not two standard errors below the pick's. Whether it
+        # and its held-out score is not two standard errors below the pick's (better counts:
+        # the pick may owe its place to the BIC's parameter penalty alone). Whether it
         # also cleared the bar against the sinusoid does not matter here: near the detection
         # limit the pick clears it by luck as much as by its own signature. A model holding
         # the pick's terms and more is no alternative: scoring like the pick only says that
@@ -795,8 +796,6 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
         delta, se, _, _, _ = score(best_res, results[m["label"]][1])
         m["delta_over_chosen"] = -delta
         m["se_over_chosen"] = se
-        # One predicting better than the pick by more than that counts too: the pick won
-        # on the BIC's parameter penalty, which the held-out score does not share.
         if delta < 2.0 * se:
             indistinguishable.append(m["label"])
     chosen_fit = full_fit(best["label"], tuple(best["harmonics"]), tuple(best["effects"]))
