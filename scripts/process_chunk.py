@@ -3,13 +3,11 @@
 Each log's outputs land in results/.chunks/<chunk>/<log_id>/ only if all its stages succeed
 (with the per-log figures for the logs that show them); a failing log is recorded with its
 error line and the others go on (rule publish_log then fails for that log alone); the
-chunk keeps the retry token it ran with, so that the next run retries a failed log."""
+chunk's record (token, failures) makes the next run retry a failed log."""
 import logging
-from pathlib import Path
 
 from enclab import stages
-from enclab.core import atomic
-from enclab.runner import RETRY_FILE, run, run_chunk
+from enclab.runner import record_chunk, run, run_chunk
 
 
 def main(smk):
@@ -21,7 +19,7 @@ def main(smk):
         p.entries, lambda entry, folder: stages.quantization_log(
             entry, folder, config, p.data_root, figures=entry["id"] in figures),
         smk.output.staging, data_root=p.data_root)
-    atomic.write_text(p.retry + "\n", Path(smk.output.staging) / RETRY_FILE)
+    record_chunk(p.record, p.retry, status)
     failed = sorted(log_id for log_id, line in status.items() if line is not None)
     logging.getLogger("enclab.process_chunk").info(
         "%d of %d logs completed; failed: %s", len(status) - len(failed), len(status), failed)

@@ -122,25 +122,26 @@ def test_failure_line_keeps_a_message_that_names_its_file():
 
 
 def test_retry_token_changes_while_a_chunk_holds_failures(tmp_path):
-    chunk = tmp_path / "chunk0000"
-    assert runner.retry_token(chunk) == ""  # no chunk yet
-    chunk.mkdir()
-    (chunk / runner.RETRY_FILE).write_text("\n")
-    assert runner.retry_token(chunk) == ""  # it ran with "" and nothing failed: no rerun
-    (chunk / "b.failed").write_text("logs/b.csv: ...\n")
-    os.utime(chunk / "b.failed", ns=(10**18, 10**18))
-    token = runner.retry_token(chunk)
-    assert token == f"b@{10**18}"  # differs from what it ran with: the next run retries it
+    record = tmp_path / "chunk0000"
+    assert runner.retry_token(record) == ""  # never ran
+    runner.record_chunk(record, "", {"a": None, "b": None})
+    assert runner.retry_token(record) == ""  # ran with "", nothing failed: no rerun
+    runner.record_chunk(record, "", {"a": None, "b": "logs/b.csv: permission denied; ..."})
+    assert (tmp_path / "chunk0000.failed").read_text() == "b: logs/b.csv: permission denied; ...\n"
+    os.utime(tmp_path / "chunk0000.failed", ns=(10**18, 10**18))
+    token = runner.retry_token(record)
+    assert token == f"failed@{10**18}"  # differs from what it ran with: the next run retries
     # the second pass of `make run` keeps what the chunk ran with
-    assert runner.retry_token(chunk, keep=True) == ""
-    # the retried chunk ran with the token; it failed again: a newer marker, a new token
-    (chunk / runner.RETRY_FILE).write_text(token + "\n")
-    assert runner.retry_token(chunk, keep=True) == token
-    os.utime(chunk / "b.failed", ns=(10**18 + 1, 10**18 + 1))
-    assert runner.retry_token(chunk) not in ("", token)
-    # fixed: no marker, the token it ran with, nothing to rerun
-    (chunk / "b.failed").unlink()
-    assert runner.retry_token(chunk) == token
+    assert runner.retry_token(record, keep=True) == ""
+    # the retried chunk, run with the token, fails again: a newer record, a new token
+    runner.record_chunk(record, token, {"b": "logs/b.csv: permission denied; ..."})
+    assert runner.retry_token(record, keep=True) == token
+    os.utime(tmp_path / "chunk0000.failed", ns=(10**18 + 1, 10**18 + 1))
+    assert runner.retry_token(record) not in ("", token)
+    # fixed: the retried chunk completes, its token is the one it ran with: nothing to rerun
+    runner.record_chunk(record, "failed@7", {"b": None})
+    assert not (tmp_path / "chunk0000.failed").exists()
+    assert runner.retry_token(record) == runner.retry_token(record, keep=True) == "failed@7"
 
 
 def test_runner_one_line_errors():

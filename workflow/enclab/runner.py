@@ -29,11 +29,12 @@ from enclab.core.allocator import keep_freed_memory
 from enclab.core.errors import EnclabInputError, failure_line
 from enclab.progress import QUIET_JOBS_ENV
 
-__all__ = ["RETRY_FILE", "run", "run_chunk", "error_line", "retry_token", "source_of"]
+__all__ = ["record_chunk", "run", "run_chunk", "error_line", "retry_token", "source_of"]
 
 _FORMAT = "%(asctime)s %(name)s %(levelname)s %(message)s"
-# The retry token a chunk job ran with, kept in its staging folder (see retry_token).
-RETRY_FILE = ".retry"
+# A chunk's record beside its log (see retry_token): the token it ran with, its failures.
+RETRY_SUFFIX = ".retry"
+FAILED_SUFFIX = ".failed"
 
 
 def _log_path(smk: Any) -> str | None:
@@ -119,8 +120,7 @@ def run_chunk(entries: Iterable[Mapping], process: Callable[[Mapping, Path], Non
     log leaves no output. Each log's messages go to ``staging/<log_id>.log``; a failed log
     also gets ``staging/<log_id>.failed`` holding its one line (its traceback, for a bug,
     follows in its log), and the next log goes on. Whatever fails (bad input, an I/O error,
-    a bug) fails that log alone; the marker makes the next run retry the chunk
-    (``chunk_retry`` in ``workflow/rules/chunks.smk``).
+    a bug) fails that log alone (:func:`record_chunk` then makes the next run retry the chunk).
 
     Parameters
     ----------
@@ -172,37 +172,49 @@ def run_chunk(entries: Iterable[Mapping], process: Callable[[Mapping, Path], Non
     return status
 
 
-def retry_token(staging: str | os.PathLike, keep: bool = False) -> str:
+def retry_token(record: str | os.PathLike, keep: bool = False) -> str:
     """The retry token of a chunk (``params.retry`` of rule ``process_chunk``).
 
     A chunk job succeeds when some of its logs failed (they fail alone), so its staging
-    folder is a complete output that holds failure markers (``<log_id>.failed``). Snakemake
-    reruns a job whose params differ from those of its last run: while markers exist, the
-    token names them with their modification times, which differ from the token the job ran
-    with, so the next run retries the chunk (after a full disk, a permission or a file was
-    fixed) and a chunk that fails again is retried again. Without markers, or with
-    ``keep`` (the second pass of ``make run``, ``batch_scope=completed``, which must not
-    redo the first pass's work), the token is the one the job ran with (:data:`RETRY_FILE`,
-    written by ``scripts/process_chunk.py``): nothing to rerun.
+    folder is a complete output although it holds failures. Snakemake reruns a job whose
+    params differ from those of its last run: the job keeps a record of its failures
+    (``<record>.failed``, outside its output, which Snakemake removes before a rerun) and of
+    the token it ran with (``<record>.retry``). While failures are recorded the token is the
+    record's modification time, which differs from the token the job ran with, so the next run
+    retries the chunk (once a full disk, a permission or a file was fixed), and a chunk that
+    fails again is retried again. Without failures, or with ``keep`` (the second pass of
+    ``make run``, ``batch_scope=completed``, which must not redo the first pass's work), the
+    token is the one the job ran with: nothing to rerun.
 
     Parameters
     ----------
-    staging : path-like
-        The chunk's staging folder (``results/.chunks/<chunk>``); it may not exist.
+    record : path-like
+        The chunk's record, without suffix (``results/logs/chunks/<chunk>``).
     keep : bool
-        Return the token the chunk ran with even if it holds failure markers.
+        Return the token the chunk ran with even if failures are recorded.
 
     Returns
     -------
     str
-        ``"<log_id>@<mtime ns> ..."`` of the markers, or the stored token ("" if none).
+        ``"failed@<mtime ns>"``, or the stored token ("" if none).
     """
-    staging = Path(staging)
-    stored = staging / RETRY_FILE
+    record = Path(record)
+    stored = record.with_name(record.name + RETRY_SUFFIX)
     token = stored.read_text(encoding="utf-8").strip() if stored.is_file() else ""
-    if keep:
+    failed = record.with_name(record.name + FAILED_SUFFIX)
+    if keep or not failed.is_file():
         return token
-    failed = sorted(staging.glob("*.failed"))
-    if not failed:
-        return token
-    return " ".join(f"{p.name[:-len('.failed')]}@{p.stat().st_mtime_ns}" for p in failed)
+    return f"failed@{failed.stat().st_mtime_ns}"
+
+
+def record_chunk(record: str | os.PathLike, token: str, status: Mapping[str, str | None]) -> None:
+    """Write a chunk's record (see :func:`retry_token`): the token it ran with and its failed
+    logs' lines (``<log_id>: <line>``), or no failure file when every log completed."""
+    record = Path(record)
+    atomic.write_text(token + "\n", record.with_name(record.name + RETRY_SUFFIX))
+    failed = record.with_name(record.name + FAILED_SUFFIX)
+    lines = [f"{log_id}: {line}" for log_id, line in status.items() if line is not None]
+    if lines:
+        atomic.write_text("\n".join(lines) + "\n", failed)
+    else:
+        failed.unlink(missing_ok=True)
