@@ -54,7 +54,7 @@ def test_run_summary_headlines_failures_and_warnings():
     failures = {"bad": {"stage": "ingest", "error": "bad.csv: column 'q', line 3: NaN."}}
     run = report.run_summary(summaries, ["a", "b", "bad", "l"], failures, ratios=RATIOS,
                              violations=pd.DataFrame(), written={"summary.json": 3})
-    assert run["logs"] == {"total": 4, "completed": 3, "failed": 1, "not_run": 0}
+    assert run["logs"] == {"total": 4, "completed": 3, "failed": 1}
     assert run["completed"] == ["a", "b", "l"] and run["not_run"] == []
     q = run["analyses"]["quantization"]
     assert q["logs"] == 2 and q["bound_violations"] == 0
@@ -214,7 +214,7 @@ def test_logs_that_never_ran_are_listed_apart_from_the_failed_ones():
                                                         "permission denied; give ..."}),
                 "later": report.failure_of({})}
     run = report.run_summary([_quant_summary("a")], ["a", "bad", "later"], failures)
-    assert run["logs"] == {"total": 3, "completed": 1, "failed": 1, "not_run": 1}
+    assert run["logs"] == {"total": 3, "completed": 1, "failed": 1}
     assert run["failed"] == [{"log_id": "bad", "stage": "ingest",
                               "error": "logs/bad.csv: permission denied; give ..."}]
     assert run["not_run"] == ["later"] and run["completed"] == ["a"]

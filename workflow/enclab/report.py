@@ -170,7 +170,7 @@ def run_summary(summaries: Sequence[Mapping], log_ids: Sequence[str],
     Returns
     -------
     dict
-        ``logs`` {total, completed, failed, not_run}, ``analyses`` {quantization, lrde,
+        ``logs`` {total, completed, failed}, ``analyses`` {quantization, lrde,
         residuals, rigs, design} (None for an analysis that did not run), ``completed``
         [log_id], ``failed`` [{log_id, stage, error}] (the logs with an error line),
         ``not_run`` [log_id] (neither completed nor failed: the run stopped before them),
@@ -189,7 +189,7 @@ def run_summary(summaries: Sequence[Mapping], log_ids: Sequence[str],
                 for s in sorted(summaries, key=lambda s: s["log_id"]) for w in s.get("warnings") or []]
     return {
         "logs": {"total": len(set(log_ids) | set(completed)), "completed": len(completed),
-                 "failed": len(failed), "not_run": len(not_run)},
+                 "failed": len(failed)},
         "analyses": {"quantization": _quantization(summaries, ratios, violations),
                      "lrde": _lrde(summaries), "residuals": _residuals(summaries),
                      "rigs": _rigs(rigs), "design": _design(design)},
@@ -305,15 +305,15 @@ def _written_line(run: Mapping) -> str:
     return ", ".join(f"{n} {kind}" for kind, n in written.items())
 
 
-def _not_run_count(logs: Mapping) -> str:
-    return f", {logs['not_run']} not run" if logs.get("not_run") else ""
+def _not_run_count(run: Mapping) -> str:
+    return f", {len(run['not_run'])} not run" if run.get("not_run") else ""
 
 
 def summary_text(run: Mapping) -> str:
     """The run summary as plain text (printed at the end of ``make run``)."""
     logs = run["logs"]
     lines = [f"enclab: {_count(logs['total'], 'log')}, {logs['completed']} completed, "
-             f"{logs['failed']} failed" + _not_run_count(logs)]
+             f"{logs['failed']} failed" + _not_run_count(run)]
     for title, items in _headlines(run):
         lines.append(f"  {title}")
         lines += [f"    {item}" for item in items]
@@ -349,7 +349,7 @@ def summary_rst(run: Mapping) -> str:
     logs = run["logs"]
     out = ["{% raw %}", "enclab run summary", "==================", "",
            f"**{_count(logs['total'], 'log')}**: {logs['completed']} completed, "
-           f"**{logs['failed']} failed**{_not_run_count(logs)}.",
+           f"**{logs['failed']} failed**{_not_run_count(run)}.",
            ""]
     for title, items in _headlines(run):
         out += [f"**{_rst_text(title)}**", ""]
@@ -376,6 +376,6 @@ def summary_rst(run: Mapping) -> str:
 def report_metadata(run: Mapping) -> dict:
     """Numbers for the report's landing page (``snakemake --report-metadata``)."""
     out = {"logs completed": run["logs"]["completed"], "logs failed": run["logs"]["failed"]}
-    if run["logs"].get("not_run"):
-        out["logs not run"] = run["logs"]["not_run"]
+    if run.get("not_run"):
+        out["logs not run"] = len(run["not_run"])
     return out
