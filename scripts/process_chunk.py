@@ -2,11 +2,12 @@
 
 Each log's outputs land in results/.chunks/<chunk>/<log_id>/ only if all its stages succeed
 (with the per-log figures for the logs that show them); a failing log is recorded with its
-error line and the others go on (rule publish_log then fails for that log alone)."""
+error line and the others go on (rule publish_log then fails for that log alone); the
+chunk's record (token, failures) makes the next run retry a failed log."""
 import logging
 
 from enclab import stages
-from enclab.runner import run, run_chunk
+from enclab.runner import record_chunk, run, run_chunk
 
 
 def main(smk):
@@ -17,7 +18,8 @@ def main(smk):
     status = run_chunk(
         p.entries, lambda entry, folder: stages.quantization_log(
             entry, folder, config, p.data_root, figures=entry["id"] in figures),
-        smk.output.staging)
+        smk.output.staging, data_root=p.data_root)
+    record_chunk(p.record, p.retry, status)
     failed = sorted(log_id for log_id, line in status.items() if line is not None)
     logging.getLogger("enclab.process_chunk").info(
         "%d of %d logs completed; failed: %s", len(status) - len(failed), len(status), failed)

@@ -8,8 +8,10 @@ stages) in one chunk, next to a paper-002 log that keeps its own rules, through 
 of ``make run``: the bad logs fail alone with their one error line and leave no output, and
 every other output is byte-identical to a run with one job per stage and log.
 """
+import errno
 import json
 import logging
+import os
 import re
 from pathlib import Path
 from types import SimpleNamespace
@@ -18,7 +20,7 @@ import numpy as np
 import pytest
 from enclab import runner, stages
 from enclab.core import atomic
-from enclab.core.errors import EnclabInputError
+from enclab.core.errors import EnclabInputError, failure_line
 from enclab.propagation.simulate import phantom_protocol_run
 from workspace import (
     copy_workspace,
@@ -64,6 +66,84 @@ def test_run_chunk_isolates_each_failure_and_leaves_no_partial_output(tmp_path):
         "a", "a.log", "bad.failed", "bad.log", "bug.failed", "bug.log", "c", "c.log"]
 
 
+def _io_process(data):
+    """A stage that fails as the entry asks: an unreadable data file, one that vanished, a
+    full disk while writing an output, bad input raised without a file name."""
+    def process(entry, folder):
+        path = data / entry["file"]
+        if entry["fail"] == "unreadable":
+            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(path))
+        if entry["fail"] == "vanished":
+            path.unlink()
+            path.read_bytes()
+        if entry["fail"] == "disk_full":
+            def full(tmp):
+                raise OSError(errno.EFBIG, os.strerror(errno.EFBIG))  # write() names no file
+            atomic.write_json({"id": entry["id"]}, folder / "first.json")
+            with pytest.MonkeyPatch.context() as patch:
+                patch.setattr(Path, "write_text", lambda self, *a, **k: full(self))
+                atomic.write_json({"id": entry["id"]}, folder / "moments.json")
+        if entry["fail"] == "short":
+            raise ValueError("need at least 50 samples, got 3")
+    return process
+
+
+def test_run_chunk_names_the_file_for_any_failure(tmp_path):
+    data = tmp_path / "logs"
+    data.mkdir()
+    kinds = ("unreadable", "vanished", "disk_full", "short")
+    for kind in kinds:
+        (data / f"{kind}.csv").write_text("t,angle\n0,0\n")
+    entries = [{"id": kind, "file": f"{kind}.csv", "fail": kind} for kind in kinds]
+    status = runner.run_chunk(entries, _io_process(data), tmp_path / "chunk", data_root=data)
+    for kind in kinds:
+        line = status[kind]
+        assert line.startswith(f"{data / kind}.csv: ") and "\n" not in line, line
+        assert "Traceback" not in (tmp_path / "chunk" / f"{kind}.log").read_text()
+        assert not (tmp_path / "chunk" / kind).exists()
+    assert "permission denied; give the workflow's user read access" in status["unreadable"]
+    assert "no such file: moved, renamed or deleted" in status["vanished"]
+    # the output being written is named, and what to do
+    assert re.search(r"\.tmp/moments\.json: no space left for it: the disk is full, or a "
+                     r"file-size limit or disk quota was reached \(File too large\); free space",
+                     status["disk_full"])
+    assert status["short"] == f"{data / 'short'}.csv: need at least 50 samples, got 3"
+
+
+def test_failure_line_keeps_a_message_that_names_its_file():
+    err = EnclabInputError("logs/x.csv", "empty or NaN value", column="angle", row=12,
+                           row_label="line")
+    assert failure_line(err, "logs/x.csv") == (str(err), True)
+    line, expected = failure_line(MemoryError(), "logs/x.csv")
+    assert expected and line.startswith("logs/x.csv: out of memory")
+    # Arrow's I/O errors carry the errno in their text only
+    arrow = OSError("Error writing bytes to file. Detail: [errno 28] No space left on device")
+    assert "the disk is full" in failure_line(arrow, "logs/x.csv")[0]
+
+
+def test_retry_token_changes_while_a_chunk_holds_failures(tmp_path):
+    record = tmp_path / "chunk0000"
+    assert runner.retry_token(record) == ""  # never ran
+    runner.record_chunk(record, "", {"a": None, "b": None})
+    assert runner.retry_token(record) == ""  # ran with "", nothing failed: no rerun
+    runner.record_chunk(record, "", {"a": None, "b": "logs/b.csv: permission denied; ..."})
+    assert (tmp_path / "chunk0000.failed").read_text() == "b: logs/b.csv: permission denied; ...\n"
+    os.utime(tmp_path / "chunk0000.failed", ns=(10**18, 10**18))
+    token = runner.retry_token(record)
+    assert token == f"failed@{10**18}"  # differs from what it ran with: the next run retries
+    # the second pass of `make run` keeps what the chunk ran with
+    assert runner.retry_token(record, keep=True) == ""
+    # the retried chunk, run with the token, fails again: a newer record, a new token
+    runner.record_chunk(record, token, {"b": "logs/b.csv: permission denied; ..."})
+    assert runner.retry_token(record, keep=True) == token
+    os.utime(tmp_path / "chunk0000.failed", ns=(10**18 + 1, 10**18 + 1))
+    assert runner.retry_token(record) not in ("", token)
+    # fixed: the retried chunk completes, its token is the one it ran with: nothing to rerun
+    runner.record_chunk(record, "failed@7", {"b": None})
+    assert not (tmp_path / "chunk0000.failed").exists()
+    assert runner.retry_token(record) == runner.retry_token(record, keep=True) == "failed@7"
+
+
 def test_runner_one_line_errors():
     err = EnclabInputError("f.csv", "no data lines", expected="two samples")
     assert runner.error_line(err) == str(err)
@@ -103,11 +183,15 @@ def test_run_logs_wall_and_cpu_time_or_one_error_line(tmp_path, root_logging):
 
     def bug(s):
         raise KeyError("channels")
-    with pytest.raises(KeyError):
+    with pytest.raises(SystemExit) as info:
         runner.run(smk("bug.log"), bug)
-    # a bug's last line comes first (the progress display shows it), then its traceback
+    assert info.value.code == 1
+    # a bug's one line comes first (the progress display and the run summary show it), then
+    # its traceback
     lines = (tmp_path / "bug.log").read_text().splitlines()
-    assert lines[0].endswith("ERROR [a] KeyError: 'channels'") and "Traceback" in lines[1]
+    assert re.search(r"ERROR \[a\] internal error KeyError: 'channels' \(a bug in enclab",
+                     lines[0])
+    assert "Traceback" in lines[1]
 
 
 def test_quantization_outputs_match_the_rules():

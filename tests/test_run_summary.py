@@ -55,6 +55,7 @@ def test_run_summary_headlines_failures_and_warnings():
     run = report.run_summary(summaries, ["a", "b", "bad", "l"], failures, ratios=RATIOS,
                              violations=pd.DataFrame(), written={"summary.json": 3})
     assert run["logs"] == {"total": 4, "completed": 3, "failed": 1}
+    assert run["completed"] == ["a", "b", "l"] and run["not_run"] == []
     q = run["analyses"]["quantization"]
     assert q["logs"] == 2 and q["bound_violations"] == 0
     assert q["ratios"][1] == {"order": 1, "name": "velocity", "n_rows": 1512,
@@ -71,6 +72,7 @@ def test_run_summary_headlines_failures_and_warnings():
     assert "l: A12 5.18 mrad [5.15 mrad, 5.21 mrad]" in text and "converged" in text
     assert "bad [ingest]: bad.csv: column 'q', line 3: NaN." in text
     assert "a: time base: sampled at 1 Hz" in text
+    assert "  completed (3): a, b, l\n" in text and "NOT RUN" not in text
 
     page = report.summary_rst(run)
     assert page.startswith("{% raw %}") and page.rstrip().endswith("{% endraw %}")
@@ -203,3 +205,24 @@ def test_thumbnail_is_small_deterministic_and_keeps_the_aspect(tmp_path):
     assert (tmp_path / "b.png").stat().st_size < (tmp_path / "full.png").stat().st_size / 3
     with pytest.raises(ValueError, match="max_width"):
         atomic.save_thumbnail(tmp_path / "full.png", tmp_path / "c.png", max_width=4)
+
+
+def test_logs_that_never_ran_are_listed_apart_from_the_failed_ones():
+    # A run stopped before some logs (e.g. Snakemake itself failed): those logs have no error
+    # line; they are "not run", not failed with no reason.
+    failures = {"bad": report.failure_of({"ingest.log": "t enclab.ingest ERROR [bad] logs/bad.csv: "
+                                                        "permission denied; give ..."}),
+                "later": report.failure_of({})}
+    run = report.run_summary([_quant_summary("a")], ["a", "bad", "later"], failures)
+    assert run["logs"] == {"total": 3, "completed": 1, "failed": 1}
+    assert run["failed"] == [{"log_id": "bad", "stage": "ingest",
+                              "error": "logs/bad.csv: permission denied; give ..."}]
+    assert run["not_run"] == ["later"] and run["completed"] == ["a"]
+    text = report.summary_text(run)
+    assert text.startswith("enclab: 3 logs, 1 completed, 1 failed, 1 not run\n")
+    assert "    bad [ingest]: logs/bad.csv: permission denied" in text
+    assert "NOT RUN (1; the run stopped before them: rerun)\n    later\n" in text
+    assert "no error line" not in text
+    page = report.summary_rst(run)
+    assert "**Not run**" in page and "- ``later``" in page
+    assert report.report_metadata(run)["logs not run"] == 1

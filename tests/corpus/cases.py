@@ -301,6 +301,57 @@ CASES: list[Case] = [
 ]
 
 
+# Files a batch loses or cannot read, logs too short for a later stage, a full disk: each costs
+# its log alone and a one-line reason naming the file; a fault (extra "fault") is then fixed and
+# the same workspace rerun, which must complete with no cleaning.
+
+
+def _unreadable(root: Path, log_id: str) -> dict:
+    """A good log that the workflow's user may not read (mode 000; tests/corpus/run.py drops
+    the capability that lets root read it anyway)."""
+    path = root / f"{log_id}.csv"
+    write_csv(good_table(), path)
+    path.chmod(0)
+    return good_entry(log_id, path.name)
+
+
+def _vanished(root: Path, log_id: str) -> dict:
+    """The log's file was moved away after the manifest was written: its link stayed."""
+    path = root / f"{log_id}.csv"
+    path.symlink_to(f"{log_id}.moved_away.csv")
+    return good_entry(log_id, path.name)
+
+
+def _pair(n: int):
+    """A truth/measured pair of ``n`` samples (the residual stage alone, after ingest)."""
+    def build(root: Path, log_id: str) -> dict:
+        entry = _pair_in_ms(root, log_id)
+        path = root / entry["file"]
+        table = pd.read_csv(path).iloc[:n]
+        table.assign(t=table["t"] / 1000.0).to_csv(path, index=False, float_format="%.17g")
+        return entry
+    return build
+
+
+CASES += [
+    Case("unreadable_file", "a log the workflow may not read (chmod 000)", _unreadable,
+         ["unreadable_file.csv", "permission denied", "read access"],
+         extra={"unreadable": True}),
+    Case("vanished_file", "the file was moved away, its link stayed", _vanished,
+         ["vanished_file.csv", "not found"]),
+    Case("three_rows", "a 3-row log (passes ingest, too short for the derivative filters)",
+         _csv_case(lambda t: t.iloc[:3]), ["three_rows.csv", "3 samples", "filter's memory"],
+         stage="quantization"),
+    Case("pair_too_short", "a 40-sample truth/measured pair: fails in the residual stage",
+         _pair(40), ["pair_too_short.csv", "samples", "40"],
+         stage="residuals"),
+    Case("disk_full_in_chunk", "the disk fills up (a file-size limit) while a chunk writes; "
+         "the limit lifted, a rerun completes", _csv_case(lambda t: t),
+         ["disk_full_in_chunk.csv", "the disk is full", "then rerun"],
+         stage="quantization", extra={"fault": "disk_full"}),
+]
+
+
 def _manifest_case(mutate: Callable[[dict], None]):
     """A good CSV log whose manifest entry (or entries) ``mutate`` breaks."""
     def build(root: Path, log_id: str) -> dict:

@@ -2,14 +2,21 @@
 
 ``run_corpus(work)`` builds every case under ``work``, runs the workflow once over all log
 cases (plus a clean control log) with ``--keep-going``, once per broken manifest or config
-(those must stop before any job), and returns one :class:`Outcome` per case with the message
-the user got. Input checksums are taken before and compared after everything ran.
+(those must stop before any job), twice per run fault (``extra["fault"]``: once with the fault,
+once after it was lifted, in the same workspace), and returns one :class:`Outcome` per case with
+the message the user got. Input checksums are taken before and compared after everything ran.
+
+An unreadable file stays readable to root: run as root, the workflow runs without the
+capabilities that let root read any file (``setpriv``), as an ordinary user's would.
 """
 from __future__ import annotations
 
 import copy
 import hashlib
 import os
+import resource
+import shutil
+import signal
 import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor
@@ -39,6 +46,9 @@ class Outcome:
 
     @property
     def passed(self) -> bool:
+        if self.case.extra.get("fault"):  # the fault's line, then a rerun that completes
+            return (self.completed and not self.leftovers
+                    and all(f in self.message for f in self.case.expect))
         if self.case.expect is None:
             wanted = self.case.extra.get("report", {})
             warning = self.case.extra.get("warning")
@@ -63,12 +73,35 @@ def _config(manifest: str, changes: dict | None = None) -> dict:
     return config
 
 
-def _snakemake(work: Path, config: dict, *extra: str) -> subprocess.CompletedProcess:
+# Root reads a mode-000 file anyway; without these capabilities it reads as a user would.
+_AS_A_USER = ["setpriv", "--inh-caps=-dac_override,-dac_read_search",
+              "--bounding-set=-dac_override,-dac_read_search"]
+# A full disk, simulated: writes past this many bytes fail with EFBIG ("File too large"), as
+# on a full disk or a quota (SIGXFSZ ignored). A small log's staged derivatives.parquet is
+# larger; Snakemake's own records are not.
+FILE_SIZE_LIMIT = 20_000
+
+
+def unreadable_files_possible() -> bool:
+    """Whether a mode-000 file is unreadable to the workflow (not root, or root and setpriv)."""
+    return os.geteuid() != 0 or shutil.which("setpriv") is not None
+
+
+def _file_size_limit() -> None:
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (FILE_SIZE_LIMIT, FILE_SIZE_LIMIT))
+
+
+def _snakemake(work: Path, config: dict, *extra: str, disk_full: bool = False
+               ) -> subprocess.CompletedProcess:
     (work / "config.yaml").write_text(yaml.safe_dump(config))
     command = [str(SNAKEMAKE), "--snakefile", str(ROOT / "Snakefile"), "--directory", str(work),
                "--configfile", str(work / "config.yaml"), "--cores", "2", "--keep-going", *extra]
+    if os.geteuid() == 0 and shutil.which("setpriv"):
+        command = _AS_A_USER + command
     return subprocess.run(command, cwd=work, capture_output=True, text=True, timeout=1200,
-                          env=dict(os.environ, MPLBACKEND="Agg"))
+                          env=dict(os.environ, MPLBACKEND="Agg"),
+                          preexec_fn=_file_size_limit if disk_full else None)
 
 
 def _error_line(text: str) -> str:
@@ -83,8 +116,14 @@ def _error_line(text: str) -> str:
 
 
 def checksums(folder: Path) -> dict[str, str]:
-    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
-            for p in sorted(folder.rglob("*")) if p.is_file()}
+    """SHA-256 of every file (a file this user may not read: its size, mode and mtime)."""
+    out = {}
+    for p in sorted(folder.rglob("*")):
+        if p.is_file():
+            out[str(p.relative_to(folder))] = (
+                hashlib.sha256(p.read_bytes()).hexdigest() if os.access(p, os.R_OK)
+                else f"unreadable {p.stat().st_size} {p.stat().st_mode:o} {p.stat().st_mtime_ns}")
+    return out
 
 
 STAGE_OUTPUTS = {"ingest": "canonical.parquet", "requantize": "requantized.parquet",
@@ -115,7 +154,8 @@ def run_corpus(work: Path) -> tuple[list[Outcome], bool]:
     checksums are unchanged after all runs."""
     data = work / "logs"
     data.mkdir(parents=True, exist_ok=True)
-    log_cases = [c for c in CASES if c.scope == "log"]
+    log_cases = [c for c in CASES if c.scope == "log" and not c.extra.get("fault")]
+    fault_cases = [c for c in CASES if c.extra.get("fault")]
     entries = [c.build(data, c.name) for c in log_cases]
     write_csv(good_table(), data / "control.csv")
     entries.append(good_entry("control", "control.csv"))
@@ -155,6 +195,21 @@ def run_corpus(work: Path) -> tuple[list[Outcome], bool]:
     # one core's imports and parsing).
     with ThreadPoolExecutor(max_workers=2) as pool:
         outcomes += list(pool.map(up_front_outcome, up_front))
+
+    for case in fault_cases:
+        sub = work / "faults" / case.name
+        (sub / "logs").mkdir(parents=True, exist_ok=True)
+        entry = case.build(sub / "logs", case.name)
+        (sub / "manifest.yaml").write_text(yaml.safe_dump({"data_root": "logs", "logs": [entry]}))
+        # The fault hits the log's chunk; then it is lifted and the workspace run again as it
+        # is, with no cleaning: the log must complete.
+        _snakemake(sub, _config("manifest.yaml"), "--", f"results/{case.name}/summary.json",
+                   disk_full=case.extra["fault"] == "disk_full")
+        failure = failure_of(read_texts(sub / "results" / case.name / "logs", "*.log"))
+        _snakemake(sub, _config("manifest.yaml"))
+        outcome = _log_outcome(sub, case)
+        outcome.message = failure["error"] if failure["stage"] else ""
+        outcomes.append(outcome)
 
     for case, built in per_log_config:
         sub = work / "per_log" / case.name

@@ -34,8 +34,9 @@ def failure_of(log_texts: Mapping[str, str]) -> dict:
     -------
     dict
         ``stage`` (the log file's name without ``.log``, e.g. ``quantization`` or ``ingest``)
-        and ``error`` (the first ``ERROR`` line, without its time stamp and log id), or a
-        pointer to the folder when no log holds an error line.
+        and ``error`` (the first ``ERROR`` line, without its time stamp and log id); ``stage``
+        None, and a pointer to the folder, when no log holds an error line (the log did not
+        run: the run stopped before it).
     """
     for name in sorted(log_texts):
         for line in log_texts[name].splitlines():
@@ -169,8 +170,10 @@ def run_summary(summaries: Sequence[Mapping], log_ids: Sequence[str],
     Returns
     -------
     dict
-        ``logs`` {total, completed, failed}, ``analyses`` {quantization, lrde, residuals,
-        rigs, design} (None for an analysis that did not run), ``failed`` [{log_id, stage, error}],
+        ``logs`` {total, completed, failed}, ``analyses`` {quantization, lrde,
+        residuals, rigs, design} (None for an analysis that did not run), ``completed``
+        [log_id], ``failed`` [{log_id, stage, error}] (the logs with an error line),
+        ``not_run`` [log_id] (neither completed nor failed: the run stopped before them),
         ``warnings`` [{log_id, warning}], ``written``.
     """
     completed = sorted(s["log_id"] for s in summaries)
@@ -178,7 +181,10 @@ def run_summary(summaries: Sequence[Mapping], log_ids: Sequence[str],
     unknown = sorted(set(failures) - set(missing))
     if unknown:
         raise ValueError(f"failures given for logs that completed or are not in the run: {unknown}")
-    failed = [{"log_id": i, **dict(failures.get(i) or failure_of({}))} for i in missing]
+    reasons = {i: dict(failures.get(i) or failure_of({})) for i in missing}
+    # A log with an error line failed; one without never ran (the run stopped before it).
+    failed = [{"log_id": i, **r} for i, r in reasons.items() if r.get("stage")]
+    not_run = [i for i, r in reasons.items() if not r.get("stage")]
     warnings = [{"log_id": s["log_id"], "warning": w}
                 for s in sorted(summaries, key=lambda s: s["log_id"]) for w in s.get("warnings") or []]
     return {
@@ -187,7 +193,9 @@ def run_summary(summaries: Sequence[Mapping], log_ids: Sequence[str],
         "analyses": {"quantization": _quantization(summaries, ratios, violations),
                      "lrde": _lrde(summaries), "residuals": _residuals(summaries),
                      "rigs": _rigs(rigs), "design": _design(design)},
+        "completed": completed,
         "failed": failed,
+        "not_run": not_run,
         "warnings": warnings,
         "written": dict(written or {}),
     }
@@ -297,11 +305,15 @@ def _written_line(run: Mapping) -> str:
     return ", ".join(f"{n} {kind}" for kind, n in written.items())
 
 
+def _not_run_count(run: Mapping) -> str:
+    return f", {len(run['not_run'])} not run" if run.get("not_run") else ""
+
+
 def summary_text(run: Mapping) -> str:
     """The run summary as plain text (printed at the end of ``make run``)."""
     logs = run["logs"]
     lines = [f"enclab: {_count(logs['total'], 'log')}, {logs['completed']} completed, "
-             f"{logs['failed']} failed"]
+             f"{logs['failed']} failed" + _not_run_count(run)]
     for title, items in _headlines(run):
         lines.append(f"  {title}")
         lines += [f"    {item}" for item in items]
@@ -311,6 +323,11 @@ def summary_text(run: Mapping) -> str:
     if run["failed"]:
         lines.append(f"  FAILED ({len(run['failed'])}; each log's messages: results/<log_id>/logs/)")
         lines += [f"    {f['log_id']} [{f['stage']}]: {f['error']}" for f in run["failed"]]
+    if run.get("not_run"):
+        lines.append(f"  NOT RUN ({len(run['not_run'])}; the run stopped before them: rerun)")
+        lines.append(f"    {', '.join(run['not_run'])}")
+    if run.get("completed"):
+        lines.append(f"  completed ({len(run['completed'])}): {', '.join(run['completed'])}")
     if run.get("written"):
         lines.append(f"  written under results/: {_written_line(run)}")
     return "\n".join(lines) + "\n"
@@ -332,7 +349,7 @@ def summary_rst(run: Mapping) -> str:
     logs = run["logs"]
     out = ["{% raw %}", "enclab run summary", "==================", "",
            f"**{_count(logs['total'], 'log')}**: {logs['completed']} completed, "
-           f"**{logs['failed']} failed**.",
+           f"**{logs['failed']} failed**{_not_run_count(run)}.",
            ""]
     for title, items in _headlines(run):
         out += [f"**{_rst_text(title)}**", ""]
@@ -341,6 +358,11 @@ def summary_rst(run: Mapping) -> str:
         out += ["**Failed logs** (their messages: ``results/<log_id>/logs/``)", ""]
         out += [f"- ``{f['log_id']}`` [{_rst_text(f['stage'])}]: {_rst_text(f['error'])}"
                 for f in run["failed"]] + [""]
+    if run.get("not_run"):
+        out += ["**Not run** (the run stopped before them: rerun)", ""]
+        out += [f"- ``{i}``" for i in run["not_run"]] + [""]
+    if run.get("completed"):
+        out += ["**Completed**: " + ", ".join(f"``{i}``" for i in run["completed"]), ""]
     if run["warnings"]:
         out += ["**Warnings**", ""]
         out += [f"- ``{w['log_id']}``: {_rst_text(w['warning'])}" for w in run["warnings"]] + [""]
@@ -353,4 +375,7 @@ def summary_rst(run: Mapping) -> str:
 
 def report_metadata(run: Mapping) -> dict:
     """Numbers for the report's landing page (``snakemake --report-metadata``)."""
-    return {"logs completed": run["logs"]["completed"], "logs failed": run["logs"]["failed"]}
+    out = {"logs completed": run["logs"]["completed"], "logs failed": run["logs"]["failed"]}
+    if run.get("not_run"):
+        out["logs not run"] = len(run["not_run"])
+    return out

@@ -6,6 +6,17 @@
 # staging each log's outputs; then one shell job per log hard-links them into results/<log_id>/
 # or fails with that log's error line, so a bad log still fails alone, leaves no output, and the
 # rest of the workflow (batch tables, `make run`'s second pass) sees the usual per-log files.
+# A chunk whose logs failed completes (they fail alone) but must not look finished to the next
+# run: its record beside its log (results/logs/chunks/<chunk>.failed, not an output) changes
+# its params' retry token (enclab.runner.retry_token), so the next run retries it (after a
+# full disk or an unreadable file was fixed) with no cleaning; `make run`'s second pass keeps it.
+
+import enclab.runner as enclab_runner
+
+
+def chunk_retry(wildcards):
+    return enclab_runner.retry_token(f"results/logs/chunks/{wildcards.chunk}",
+                                     keep=config.get("batch_scope", "all") == "completed")
 
 
 rule process_chunk:
@@ -22,6 +33,8 @@ rule process_chunk:
         moments=config["moments"],
         figures=lambda wc: [i for i in CHUNKS[wc.chunk] if i in CHUNK_FIGURE_IDS],
         code=CODE_DIGEST,
+        retry=chunk_retry,
+        record=lambda wc: f"results/logs/chunks/{wc.chunk}",
     threads: 1
     log:
         "results/logs/chunks/{chunk}.log",

@@ -122,17 +122,28 @@ wildcard_constraints:
     chunk=r"chunk\d+",
 
 
+def _readable(path):
+    return os.path.exists(path) and os.access(path, os.R_OK)
+
+
 def raw_inputs(wildcards):
-    # A missing file is left out so that ingest runs and fails for this log alone with a
-    # clear message (a missing input would stop Snakemake from building the whole DAG).
+    # A missing or unreadable file is left out so that ingest runs and fails for this log
+    # alone with a clear message: a missing input would stop Snakemake from building the whole
+    # DAG, and an unreadable one stops the whole run when Snakemake records a finished job's
+    # metadata (it reads every input under --max-checksum-file-size to store its checksum).
     files = enclab_readers.entry_files(ENTRIES[wildcards.log_id], DATA_ROOT)
-    return [f for f in files if os.path.exists(f)]
+    return [f for f in files if _readable(f)]
 
 
 def chunk_raw_inputs(wildcards):
-    """The existing data files of every log in a chunk (see raw_inputs)."""
+    """The readable data files of every log in a chunk (see raw_inputs)."""
     return [f for i in CHUNKS[wildcards.chunk]
-            for f in enclab_readers.entry_files(ENTRIES[i], DATA_ROOT) if os.path.exists(f)]
+            for f in enclab_readers.entry_files(ENTRIES[i], DATA_ROOT) if _readable(f)]
+
+
+def source_of(wildcards):
+    """The log's data file, which a failure of any of its jobs names (enclab.runner)."""
+    return enclab_readers.entry_files(ENTRIES[wildcards.log_id], DATA_ROOT)[0]
 
 
 def entry_of(wildcards):

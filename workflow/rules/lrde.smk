@@ -19,6 +19,7 @@ rule lrde_fit:
     params:
         settings=lambda wc: lrde_settings(wc),
         code=CODE_DIGEST,
+        source=source_of,
     # the comparison's point fits and the emcee fits run side by side (same results with 1)
     threads: 2
     # the longest job of a run: started first (the greedy scheduler prefers larger inputs)

@@ -9,6 +9,7 @@ rule requantize:
     params:
         requantize=config["requantize"],
         code=CODE_DIGEST,
+        source=source_of,
     log:
         "results/{log_id}/logs/requantize.log",
     benchmark:
@@ -24,6 +25,7 @@ rule kinematics:
         kinematics="results/{log_id}/kinematics.parquet",
     params:
         code=CODE_DIGEST,
+        source=source_of,
     log:
         "results/{log_id}/logs/kinematics.log",
     benchmark:
@@ -41,6 +43,7 @@ rule derivatives:
         export=config["derivatives"]["export"],
         derivatives=config["derivatives"],
         code=CODE_DIGEST,
+        source=source_of,
     log:
         "results/{log_id}/logs/derivatives.log",
     benchmark:
@@ -59,6 +62,7 @@ rule moments:
         derivatives=config["derivatives"],
         moments=config["moments"],
         code=CODE_DIGEST,
+        source=source_of,
     log:
         "results/{log_id}/logs/moments.log",
     benchmark:
@@ -76,6 +80,7 @@ rule theory:
     params:
         derivatives=config["derivatives"],
         code=CODE_DIGEST,
+        source=source_of,
     log:
         "results/{log_id}/logs/theory.log",
     benchmark:
@@ -91,6 +96,7 @@ rule summary:
         summary="results/{log_id}/summary.json",
     params:
         code=CODE_DIGEST,
+        source=source_of,
     log:
         "results/{log_id}/logs/summary.log",
     benchmark:
@@ -113,6 +119,7 @@ rule log_figures:
         export=config["derivatives"]["export"],
         settle_tol=config["derivatives"]["settle_tol"],
         code=CODE_DIGEST,
+        source=source_of,
     log:
         "results/{log_id}/logs/log_figures.log",
     benchmark:

@@ -17,6 +17,7 @@ rule residuals:
         pair=lambda wc: residual_pair(wc),
         settings=lambda wc: residual_settings(wc),
         code=CODE_DIGEST,
+        source=source_of,
     threads: 1
     # an LRDE fit (the longest job) waits for its log's residual stage
     priority: 1

@@ -23,6 +23,8 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from enclab.core.errors import os_errno
+
 __all__ = [
     "CANONICAL_METADATA_KEY",
     "atomic_folder",
@@ -71,9 +73,23 @@ def _atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     try:
         yield tmp
         os.replace(tmp, path)
+    except OSError as err:
+        tmp.unlink(missing_ok=True)
+        raise _naming(err, tmp, path) from err
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def _naming(err: OSError, tmp: Path, path: Path) -> OSError:
+    """``err`` naming the output it failed to write, when it names no file or the temporary
+    one (a write() on a full disk raises ``OSError(EFBIG)`` or ``OSError(ENOSPC)`` without a
+    file name; pyarrow's errors quote the errno in their text only)."""
+    if err.filename is not None and Path(err.filename) != tmp:
+        return err
+    code = os_errno(err)
+    strerror = os.strerror(code) if code is not None else str(err)
+    return OSError(code, strerror, str(path))
 
 
 @contextlib.contextmanager
