@@ -534,3 +534,31 @@ def test_scale_ratio_is_blind_to_an_offset_and_exact_on_a_line():
     # mean-free sums of 101 values of order 1: float64 rounding of the sums, a few ulp each
     assert ratio == pytest.approx(3.0, rel=1e-13) and r2 == pytest.approx(1.0, rel=1e-13)
     assert ingest.scale_ratio(np.ones(5), x[:5]) is None
+
+
+# ----------------------------------------------------------------------------- memory
+
+
+def test_a_text_log_too_large_for_the_memory_is_refused_before_reading(tmp_path, monkeypatch):
+    (tmp_path / "x.csv").write_text("t,a\n" + "".join(f"{i / 100},{i}\n" for i in range(100)))
+    e = entry([ch("a")], {"column": "t"})
+    size = (tmp_path / "x.csv").stat().st_size
+    # just enough free memory: read; a byte less than the estimate: refused, naming the fix
+    monkeypatch.setattr(ingest, "available_memory_bytes", lambda: int(ingest.TEXT_READ_BYTES_PER_BYTE * size))
+    df, _ = ingest.ingest_log(e, tmp_path, DEVICES)
+    assert len(df) == 100
+    monkeypatch.setattr(ingest, "available_memory_bytes",
+                        lambda: int(ingest.TEXT_READ_BYTES_PER_BYTE * size) - 1)
+    with pytest.raises(EnclabInputError) as info:
+        ingest.ingest_log(e, tmp_path, DEVICES)
+    message = str(info.value)
+    assert "x.csv" in message and "of text needs about" in message and "Parquet" in message
+    assert "\n" not in message
+    # no /proc/meminfo (another system): nothing to judge by, the log is read
+    monkeypatch.setattr(ingest, "available_memory_bytes", lambda: None)
+    assert len(ingest.ingest_log(e, tmp_path, DEVICES)[0]) == 100
+
+
+def test_available_memory_is_read_where_the_system_reports_it():
+    free = ingest.available_memory_bytes()
+    assert free is None or free > 0

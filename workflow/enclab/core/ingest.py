@@ -33,7 +33,9 @@ __all__ = [
     "SLOW_RATE_HZ",
     "TIME_UNITS",
     "UNIT_FACTORS",
+    "available_memory_bytes",
     "canonicalize",
+    "check_text_memory",
     "detect_grid",
     "off_grid",
     "collapse_repeats",
@@ -625,11 +627,59 @@ def canonicalize(raw, entry: dict, devices: dict) -> tuple[pd.DataFrame, dict]:
     return df, meta
 
 
+# Peak memory of reading a text log, per byte of its (uncompressed) text: 5.3 measured for a
+# 158 MB, 3e6-row CSV (workflow/benchmarks/bench_memory.py), rounded up.
+TEXT_READ_BYTES_PER_BYTE = 6.0
+
+
+def available_memory_bytes() -> int | None:
+    """``MemAvailable`` of ``/proc/meminfo`` (bytes), or None where there is no such file."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as handle:
+            for line in handle:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
+
+def check_text_memory(entry: dict, data_root: str | os.PathLike) -> None:
+    """Refuse, with one line, a text log whose reading would need more memory than is free.
+
+    Reading a CSV or text export holds its lines as Python strings (about
+    :data:`TEXT_READ_BYTES_PER_BYTE` bytes per byte of text); a log too large for that is
+    refused before it is read, instead of the job being killed by the system. A gzip file is
+    judged by its uncompressed size (the last four bytes, modulo 4 GiB).
+    """
+    if entry["format"] not in ("csv", "text"):
+        return
+    path = Path(data_root) / entry["file"]
+    try:
+        size = path.stat().st_size
+        with open(path, "rb") as handle:
+            if handle.read(2) == b"\x1f\x8b":
+                handle.seek(-4, os.SEEK_END)
+                size = max(size, int.from_bytes(handle.read(4), "little"))
+    except OSError:
+        return  # the reader names the file's problem
+    need, free = TEXT_READ_BYTES_PER_BYTE * size, available_memory_bytes()
+    if free is not None and need > free:
+        raise EnclabInputError(
+            str(path), f"{size / 1e9:.2f} GB of text needs about {need / 1e9:.1f} GB of memory to "
+            f"read, {free / 1e9:.1f} GB are available", expected="a log that fits in memory",
+            hint="Convert it to Parquet (one float64 or int64 column per channel: about 8 bytes "
+            "per value to read), or split it into several logs; see docs/long-logs.md.")
+
+
 def ingest_log(entry: dict, data_root: str | os.PathLike, devices: dict) -> tuple[pd.DataFrame, dict]:
     """Read one log and convert it to the canonical form (see :func:`canonicalize`).
 
-    Also records the SHA-256 of the data file in ``meta["source"]["sha256"]``.
+    A text log too large to read in the memory available is refused first
+    (:func:`check_text_memory`). Also records the SHA-256 of the data file in
+    ``meta["source"]["sha256"]``.
     """
+    check_text_memory(entry, data_root)
     raw = read_raw(entry, data_root)
     df, meta = canonicalize(raw, entry, devices)
     meta["source"]["sha256"] = file_sha256(Path(data_root) / entry["file"])
