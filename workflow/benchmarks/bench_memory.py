@@ -15,9 +15,13 @@ Rows go to ``results/benchmarks/performance.csv`` (section ``workflow``, one cas
 length; :func:`bench_performance.write_section`), with the 1.5 GB target. A run that fails
 (e.g. a refused log) is recorded with the one-line reason of its job log.
 
+With ``--ingest-only`` only the ingest stage runs, in a child process under GNU ``time``
+(for a log whose whole run takes too long to measure here).
+
 Usage::
 
     nice python workflow/benchmarks/bench_memory.py --samples 3000000
+    nice python workflow/benchmarks/bench_memory.py --samples 30000000 --ingest-only
 """
 from __future__ import annotations
 
@@ -65,6 +69,23 @@ def ensure_log(path: pathlib.Path, n: int, seed: int) -> None:
 def run_workflow(work: pathlib.Path, log: pathlib.Path, log_id: str) -> tuple[int, float, float, str]:
     """Run the workflow on one log; return (exit code, wall s, end-to-end peak MB, error)."""
     work.mkdir(parents=True, exist_ok=True)
+    _write_inputs(work, log, log_id)
+    snakemake = pathlib.Path(sys.executable).with_name("snakemake")
+    command = ["/usr/bin/time", "-v", str(snakemake), "--snakefile", str(ROOT / "Snakefile"),
+               "--directory", str(work), "--configfile", str(work / "config.yaml"),
+               "--cores", "1", "--keep-going"]
+    proc = subprocess.run(command, cwd=work, capture_output=True, text=True)
+    peak, seconds = _gnu_time(proc.stderr)
+    error = ""
+    for path in sorted((work / "results" / log_id / "logs").glob("*.log")):
+        for line in path.read_text(errors="replace").splitlines():
+            if " ERROR " in line:
+                error = line.split(" ERROR ", 1)[1].strip()
+    return proc.returncode, seconds, peak, error
+
+
+def _write_inputs(work: pathlib.Path, log: pathlib.Path, log_id: str) -> None:
+    """The one-log manifest and the configuration naming it, in ``work``."""
     manifest = {"data_root": str(log.parent), "logs": [{
         "id": log_id, "file": log.name, "format": "csv", "device": "lrde_axis",
         "time": {"column": "t", "unit": "s"},
@@ -74,20 +95,33 @@ def run_workflow(work: pathlib.Path, log: pathlib.Path, log_id: str) -> tuple[in
     config = yaml.safe_load((ROOT / "config.yaml").read_text())
     config["manifest"] = str(work / "manifest.yaml")
     (work / "config.yaml").write_text(yaml.safe_dump(config))
-    snakemake = pathlib.Path(sys.executable).with_name("snakemake")
-    command = ["/usr/bin/time", "-v", str(snakemake), "--snakefile", str(ROOT / "Snakefile"),
-               "--directory", str(work), "--configfile", str(work / "config.yaml"),
-               "--cores", "1", "--keep-going"]
-    proc = subprocess.run(command, cwd=work, capture_output=True, text=True)
-    peak = float(re.search(r"Maximum resident set size \(kbytes\): (\d+)", proc.stderr).group(1)) / 1024
-    wall = re.search(r"Elapsed \(wall clock\) time \(h:mm:ss or m:ss\): ([\d:.]+)", proc.stderr).group(1)
-    seconds = sum(float(x) * 60 ** i for i, x in enumerate(reversed(wall.split(":"))))
-    error = ""
-    for path in sorted((work / "results" / log_id / "logs").glob("*.log")):
-        for line in path.read_text(errors="replace").splitlines():
-            if " ERROR " in line:
-                error = line.split(" ERROR ", 1)[1].strip()
-    return proc.returncode, seconds, peak, error
+
+
+def run_ingest(work: pathlib.Path, log: pathlib.Path, log_id: str) -> tuple[int, float, float, str]:
+    """The ingest stage alone in a child process under GNU time (for logs whose whole run is too
+    long to measure here); same return as :func:`run_workflow`."""
+    work.mkdir(parents=True, exist_ok=True)
+    code = (
+        "import sys, yaml\n"
+        "from enclab.core.manifest import validate_manifest\n"
+        "from enclab import stages\n"
+        f"config = yaml.safe_load(open({str(ROOT / 'config.yaml')!r}))\n"
+        f"doc = yaml.safe_load(open({str(work / 'manifest.yaml')!r}))\n"
+        "root, (entry,) = validate_manifest(doc, config['devices'], 'manifest.yaml')\n"
+        f"stages.ingest(entry, root, config['devices'], {str(work / 'canonical.parquet')!r})\n")
+    _write_inputs(work, log, log_id)
+    proc = subprocess.run(["/usr/bin/time", "-v", sys.executable, "-c", code], cwd=work,
+                          capture_output=True, text=True)
+    peak, seconds = _gnu_time(proc.stderr)
+    lines = [line for line in proc.stderr.splitlines() if line.strip() and not line.startswith("\t")]
+    return proc.returncode, seconds, peak, "" if proc.returncode == 0 else (lines[-1] if lines else "")
+
+
+def _gnu_time(stderr: str) -> tuple[float, float]:
+    """(maximum resident set size MB, wall seconds) of GNU ``time -v`` output."""
+    peak = float(re.search(r"Maximum resident set size \(kbytes\): (\d+)", stderr).group(1)) / 1024
+    wall = re.search(r"Elapsed \(wall clock\) time \(h:mm:ss or m:ss\): ([\d:.]+)", stderr).group(1)
+    return peak, sum(float(x) * 60 ** i for i, x in enumerate(reversed(wall.split(":"))))
 
 
 def job_peaks(work: pathlib.Path) -> list[tuple[str, float, float]]:
@@ -108,6 +142,8 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=20261204)
     p.add_argument("--out", type=pathlib.Path, default=OUT_DIR / "performance.csv")
     p.add_argument("--keep", action="store_true", help="keep the run's results directory")
+    p.add_argument("--ingest-only", action="store_true",
+                   help="measure the ingest stage alone (a log whose whole run is too long here)")
     p.add_argument("--label", default="", help="added to the case, e.g. the package's commit when "
                    "PYTHONPATH points at another checkout")
     args = p.parse_args(argv)
@@ -119,8 +155,19 @@ def main(argv=None) -> int:
         ensure_log(log, n, args.seed)
         work = WORK / "runs" / log_id
         shutil.rmtree(work, ignore_errors=True)
-        code, seconds, peak, error = run_workflow(work, log, log_id)
         case = f"truth+measured, {n:,} samples" + (f", {args.label}" if args.label else "")
+        if args.ingest_only:
+            code, seconds, peak, error = run_ingest(work, log, log_id)
+            rows.append({"section": "workflow", "case": case, "stage": "ingest alone (GNU time)",
+                         "n_samples": n, "n_joints": 1, "reps": 1, "median_s": round(seconds, 1),
+                         "samples_per_s": round(n / seconds), "ratio_to_read": "",
+                         "peak_rss_mb": round(peak), "target": "", "met": "",
+                         "notes": f"{log.stat().st_size / 1e6:.0f} MB CSV; "
+                                  + ("completed" if code == 0 else f"failed: {error}")})
+            print(rows[-1])
+            shutil.rmtree(work, ignore_errors=True)
+            continue
+        code, seconds, peak, error = run_workflow(work, log, log_id)
         note = "completed" if code == 0 else f"failed: {error}"
         rows.append({"section": "workflow", "case": case, "stage": "end to end (snakemake --cores 1)",
                      "n_samples": n, "n_joints": 1, "reps": 1, "median_s": round(seconds, 1),
