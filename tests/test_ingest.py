@@ -193,7 +193,7 @@ def test_off_declared_grid_names_the_worst_line():
 # ----------------------------------------------------------------------------- time base
 
 
-@pytest.mark.parametrize(("unit", "scale"), [("s", 1.0), ("ms", 1e-3), ("us", 1e-6)])
+@pytest.mark.parametrize(("unit", "scale"), [("s", 1.0), ("ms", 1e-3), ("us", 1e-6), ("ns", 1e-9)])
 def test_time_column_units(unit, scale):
     stamps = np.arange(5) * 0.002 / scale
     df, meta = convert({"a": np.zeros(5)}, time=stamps, time_spec={"column": "t", "unit": unit}, a={})
@@ -228,6 +228,38 @@ def test_a_moving_encoder_below_10_hz_gets_a_time_base_warning(unit, fix):
     assert meta["warnings"] == []
     _, meta = convert(moving, time=stamps, time_spec={"column": "t", "unit": unit}, theta={})
     assert meta["warnings"] == []
+
+
+@pytest.mark.parametrize(("unit", "factor", "fits"), [
+    ("s", 1e9, "ns"), ("s", 1e6, "us"), ("ms", 1e6, "ns"),   # too slow: a finer unit fits
+    ("ms", 1e-3, "s"), ("us", 1e-3, "ms"), ("ns", 1e-6, "ms"),  # too fast: a coarser one
+])
+def test_a_time_base_off_by_a_power_of_1000_names_the_unit_that_fits(unit, factor, fits):
+    # 1 kHz stamps written in one unit, declared in another (1e3, 1e6 or 1e9 apart): only the
+    # unit that brings the rate between 10 Hz and 100 kHz is named (1 kHz in it).
+    seconds = np.arange(50) / 1000.0
+    stamps = seconds / {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}[unit] * factor
+    _, meta = convert({"theta": np.sin(np.arange(50) / 5.0)}, time=stamps,
+                      time_spec={"column": "t", "unit": unit}, theta={"role": "truth", "joint": 1})
+    (line,) = meta["warnings"]
+    assert line.startswith("time base: ") and " in x.csv, implausibly " in line
+    assert line.endswith(f"is the time column 't' in {fits}? (set time.unit: {fits})")
+
+
+def test_a_time_base_that_fits_two_units_names_both_with_their_rates():
+    # 20 kHz stamps in ns declared as s read as 2e-5 Hz: us (20 Hz) and ns (20 kHz) both fall in
+    # the plausible range; both are named, the rate nearer 1 kHz on a log scale first.
+    stamps = np.arange(50) / 20000.0 * 1e9
+    _, meta = convert({"theta": np.sin(np.arange(50) / 5.0)}, time=stamps,
+                      time_spec={"column": "t", "unit": "s"}, theta={"role": "truth", "joint": 1})
+    assert meta["warnings"][0].endswith("in ns (2e+04 Hz) or us (20 Hz)? (set time.unit: ns or us)")
+
+
+def test_a_nominal_rate_contradicted_by_a_unit_factor_names_the_unit():
+    with pytest.raises(EnclabInputError) as info:
+        convert({"a": np.zeros(6)}, time=np.arange(6) * 1e6, a={},
+                time_spec={"column": "t", "unit": "s", "nominal_rate_hz": 1000.0})
+    assert "(the stamps fit time.unit: ns)" in str(info.value)
 
 
 def test_time_base_warning_of_a_rate_only_log_names_rate_hz():
@@ -296,7 +328,13 @@ def test_time_file_fixture_reports_the_repeat_and_the_gap():
     # the repeated stamp of sample 5 makes the next step a double one: two gaps in all
     assert (report["n_repeated"], report["n_gaps"]) == (1, 2)
     assert report["max_gap_s"] == pytest.approx(0.03, abs=2e-6)  # stamps printed with 6 decimals
-    np.testing.assert_array_equal(df["q1"], fixtures.STEP * COUNTS)
+    # the repeat is collapsed to its first row (sample 4, 0-based), and the warning names it
+    assert report["repeated_rows"] == [5]
+    np.testing.assert_array_equal(df["q1"], fixtures.STEP * np.delete(COUNTS, 4))
+    assert np.all(np.diff(df["t"]) > 0) and meta["n_samples"] == N - 1
+    (line,) = meta["warnings"]
+    assert line.startswith("repeated time stamps: 1 row of ") and "sample_major_time.txt" in line
+    assert "(line 5), with other values than the row before" in line
 
 
 @pytest.mark.parametrize(("nominal", "ok"), [(104.0, True), (96.0, True), (106.0, False), (50.0, False)])
@@ -389,3 +427,138 @@ def test_degrees_declared_as_radians_are_rejected_unless_multi_turn():
     np.testing.assert_array_equal(df["q"], degrees)
     df, _ = convert({"q": degrees}, q=spec | {"unit": "deg"})
     np.testing.assert_allclose(df["q"], np.deg2rad(degrees))
+
+
+# ----------------------------------------------------------------------------- repeated stamps
+
+
+def test_rows_written_twice_are_collapsed_and_reported():
+    # a logger that wrote 40 rows twice (each row followed by its copy): 40 repeated stamps,
+    # collapsed to the first of each, the log as if written once; the warning names the rows
+    t = np.arange(200) / 100.0
+    theta = np.sin(2 * np.pi * t)
+    twice = np.concatenate((np.arange(60), np.repeat(np.arange(60, 100), 2), np.arange(100, 200)))
+    df, meta = convert({"theta": theta[twice]}, time=t[twice], time_spec={"column": "t"},
+                       theta={"role": "truth", "joint": 1})
+    np.testing.assert_array_equal(df["t"], t)
+    np.testing.assert_array_equal(df["theta"], theta)
+    report = meta["time_report"]
+    assert report["n_repeated"] == 40 and meta["n_samples"] == 200
+    # sample 61 (0-based) is the copy of sample 60, on line 63 (header on line 1)
+    assert report["repeated_rows"][:3] == [63, 65, 67] and len(report["repeated_rows"]) == 20
+    (line,) = meta["warnings"]
+    assert line.startswith("repeated time stamps: 40 rows of x.csv column 't'")
+    assert "(line 63, 65, 67, 69, 71, ...)" in line and "a copy of the row before" in line
+
+
+def test_a_repeated_stamp_with_another_value_keeps_the_first_row():
+    df, meta = convert({"theta": [0.0, 0.1, 0.2, 0.3, 0.4]}, time=[0.0, 0.01, 0.01, 0.03, 0.04],
+                       time_spec={"column": "t"}, theta={"role": "truth", "joint": 1, "detect_grid": False})
+    np.testing.assert_array_equal(df["theta"], [0.0, 0.1, 0.3, 0.4])
+    assert "other values than the row before" in meta["warnings"][-1]
+    assert meta["time_report"]["repeated_rows"] == [4]
+
+
+# ----------------------------------------------------------------------------- unit factors
+
+
+def _pair(measured_values, truth_unit="rad", n=3000, **measured):
+    """A truth/measured pair of one joint: 0.3 rad sine, measured on a 1 mrad grid."""
+    t = np.arange(n) / 1000.0
+    truth = 0.3 * np.sin(2 * np.pi * 2 * t) + 0.1
+    truth_values = truth / ingest.UNIT_FACTORS[truth_unit]
+    return convert({"truth": truth_values, "meas": measured_values(truth)}, time=t,
+                   time_spec={"column": "t"}, truth={"role": "truth", "joint": 1, "unit": truth_unit},
+                   meas={"role": "measured", "joint": 1, **measured})
+
+
+def _grid(theta, step=1e-3):
+    return np.floor(theta / step + 0.5) * step
+
+
+@pytest.mark.parametrize(("values", "declared", "factor", "fix"), [
+    (lambda th: _grid(th), "deg", "1/57.2958 = rad declared as deg", "(set unit: rad)"),
+    (lambda th: np.rad2deg(_grid(th)), "rad", "57.2958 = deg declared as rad", "(set unit: deg)"),
+    (lambda th: _grid(th), "mrad", "1/1000 = rad declared as mrad", "(set unit: rad)"),
+    (lambda th: 1e3 * _grid(th), "deg", "17.4533 = mrad declared as deg", "(set unit: mrad)"),
+])
+def test_a_measured_channel_in_another_angle_unit_is_warned_about(values, declared, factor, fix):
+    _, meta = _pair(values, unit=declared, multi_turn=True)
+    (line,) = meta["warnings"]
+    assert line.startswith("unit factor: in x.csv, channel 'meas' (column 'col_meas') moves ")
+    assert "the truth 'truth' (column 'col_truth') of joint 1" in line
+    assert f"factor {factor}" in line and line.endswith(fix)
+
+
+@pytest.mark.parametrize("k", [-3, -1, 1, 2, 10])
+def test_counts_per_rev_off_by_a_power_of_two_is_warned_about(k):
+    # an encoder of 4096 counts per rev declared with 4096 / 2**k: the angle is 2**k too large
+    counts = lambda th: np.floor(th / (2 * np.pi / 4096) + 0.5)  # noqa: E731
+    _, meta = _pair(counts, unit="counts", counts_per_rev=4096 / 2.0**k, multi_turn=True)
+    (line,) = meta["warnings"]
+    power = f"2^{k}" if k > 0 else f"1/2^{-k}"
+    assert f"factor {power}, a power of two: counts_per_rev {4096 / 2.0**k:g} declared, 4096 fits" in line
+
+
+@pytest.mark.parametrize(("scale", "extra"), [
+    (1.0, {}),                      # the same angle on two grids
+    (1.0005, {}),                   # a real scale error of 5e-4 (a counts-per-rev slip)
+    (1.0 / 57.2958 * 1.05, {"unit": "deg"}),  # 5 % from the unit factor: physical, not a unit
+])
+def test_no_unit_factor_warning_for_a_physical_scale(scale, extra):
+    _, meta = _pair(lambda th: _grid(th * scale), **extra)
+    assert meta["warnings"] == []
+
+
+def test_a_geared_pair_declared_with_its_gear_ratio_is_not_warned_about():
+    # motor-side counts through a 32:1 gearbox (a power of two), declared: the angles agree
+    cpr, gear = 2048, 32.0
+    motor = lambda th: np.floor(th * gear / (2 * np.pi / cpr) + 0.5)  # noqa: E731
+    _, meta = _pair(motor, unit="counts", counts_per_rev=cpr, gear_ratio=gear)
+    assert meta["warnings"] == []
+    # ... the same gearbox left out of the declaration is a power of two: warned about
+    _, meta = _pair(motor, unit="counts", counts_per_rev=cpr, multi_turn=True)
+    assert "factor 2^5, a power of two" in meta["warnings"][0]
+
+
+def test_channels_that_do_not_track_each_other_are_not_compared():
+    # a measured channel that is noise (r^2 far below 0.99) says nothing about units
+    rng = np.random.default_rng(3)
+    _, meta = _pair(lambda th: rng.normal(0.0, 0.3 / 57.3, th.size), unit="rad")
+    assert meta["warnings"] == []
+
+
+def test_scale_ratio_is_blind_to_an_offset_and_exact_on_a_line():
+    x = np.linspace(-1.0, 1.0, 101)
+    ratio, r2 = ingest.scale_ratio(x, 3.0 * x + 7.0)
+    # mean-free sums of 101 values of order 1: float64 rounding of the sums, a few ulp each
+    assert ratio == pytest.approx(3.0, rel=1e-13) and r2 == pytest.approx(1.0, rel=1e-13)
+    assert ingest.scale_ratio(np.ones(5), x[:5]) is None
+
+
+# ----------------------------------------------------------------------------- memory
+
+
+def test_a_text_log_too_large_for_the_memory_is_refused_before_reading(tmp_path, monkeypatch):
+    (tmp_path / "x.csv").write_text("t,a\n" + "".join(f"{i / 100},{i}\n" for i in range(100)))
+    e = entry([ch("a")], {"column": "t"})
+    size = (tmp_path / "x.csv").stat().st_size
+    # just enough free memory: read; a byte less than the estimate: refused, naming the fix
+    monkeypatch.setattr(ingest, "available_memory_bytes", lambda: int(ingest.TEXT_READ_BYTES_PER_BYTE * size))
+    df, _ = ingest.ingest_log(e, tmp_path, DEVICES)
+    assert len(df) == 100
+    monkeypatch.setattr(ingest, "available_memory_bytes",
+                        lambda: int(ingest.TEXT_READ_BYTES_PER_BYTE * size) - 1)
+    with pytest.raises(EnclabInputError) as info:
+        ingest.ingest_log(e, tmp_path, DEVICES)
+    message = str(info.value)
+    assert "x.csv" in message and "of text needs about" in message and "Parquet" in message
+    assert "\n" not in message
+    # no /proc/meminfo (another system): nothing to judge by, the log is read
+    monkeypatch.setattr(ingest, "available_memory_bytes", lambda: None)
+    assert len(ingest.ingest_log(e, tmp_path, DEVICES)[0]) == 100
+
+
+def test_available_memory_is_read_where_the_system_reports_it():
+    free = ingest.available_memory_bytes()
+    assert free is None or free > 0

@@ -76,6 +76,8 @@ def test_mrdlab_steps_and_rate(logs):
     assert channel(meta, "theta_cui")["step"] == pytest.approx(2 * math.pi / 8192, rel=1e-15)
     assert channel(meta, "theta_front")["step"] == pytest.approx(2 * math.pi / 4000, rel=1e-15)
     assert all(channel(meta, n)["storage"] == "counts" for n in ("theta_motor", "theta_cui", "theta_front"))
+    # median of differences of stamps printed to 1 us (up to 20 s): float64 rounding of one
+    # difference is <= 2 ulp(20 s) = 7e-15 s, 7e-12 of 1 ms; one print unit would be 1e-3
     assert meta["fs_hz"] == pytest.approx(1000.0, rel=1e-6)
     assert meta["time_report"]["jitter_rms_s"] < 1e-9  # time stamps printed to 1 us, all 1 ms apart
 

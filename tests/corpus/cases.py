@@ -240,7 +240,8 @@ CASES: list[Case] = [
     Case("non_monotonic_time", "two time stamps swapped", _csv_lines_case(_walk_back),
          ["non_monotonic_time.csv", "'t'", "line 103", "0.1 s after 0.101 s"]),
     Case("repeated_time", "one repeated time stamp (reported, not rejected)",
-         _csv_lines_case(_repeat_stamp), None, extra={"report": {"n_repeated": 1}}),
+         _csv_lines_case(_repeat_stamp), None,
+         extra={"report": {"n_repeated": 1}, "warning": "repeated time stamps: 1 row of"}),
     Case("gapped_time", "20 missing samples (reported, not rejected)", _csv_lines_case(_gap), None,
          extra={"report": {"n_gaps": 1}}),
     Case("rate_contradicts_stamps", "nominal_rate_hz 500 for 1 kHz time stamps",
@@ -411,4 +412,64 @@ CASES += [
          _config_case({"derivatives.bank.fc_hz": [50, 600]}),
          ["derivatives.bank.fc_hz", "600 Hz", "Nyquist", "config_cutoff_above_nyquist"],
          scope="config", stage="quantization"),
+]
+
+
+# Declarations the data contradict: a truth/measured pair (the residual stage alone) that
+# completes with a warning in summary.json naming the file, the column and what fits.
+
+
+def _declared_pair(measured, entry_mut=None, time_factor: float = 1.0, rows=None):
+    """A truth/measured pair: ``measured(truth)`` gives the file's measured column, ``rows`` the
+    order in which the logger wrote the samples, ``time_factor`` the time column's unit."""
+    def build(root: Path, log_id: str) -> dict:
+        t = np.arange(N) / FS
+        truth = 0.2 * np.sin(2 * np.pi * 3.0 * t) + 0.05
+        table = pd.DataFrame({"t": t * time_factor, "truth": truth, "measured": measured(truth)})
+        if rows is not None:
+            table = table.iloc[rows(N)]
+        path = root / f"{log_id}.csv"
+        table.to_csv(path, index=False, float_format="%.17g")
+        entry = {"id": log_id, "file": path.name, "format": "csv", "device": "lrde_axis",
+                 "time": {"column": "t", "unit": "s"},
+                 "channels": [{"name": "truth", "column": "truth", "role": "truth", "joint": 1},
+                              {"name": "measured", "column": "measured", "role": "measured",
+                               "joint": 1}]}
+        if entry_mut:
+            entry_mut(entry)
+        return entry
+    return build
+
+
+def _on_grid(theta, step=4 * STEP):
+    return np.floor(theta / step + 0.5) * step
+
+
+def _counts_4096(theta):
+    return np.floor(theta / (2 * np.pi / 4096) + 0.5).astype(np.int64)
+
+
+def _twice(n):
+    """Rows 700..739 written twice, each followed by its copy."""
+    return np.concatenate((np.arange(700), np.repeat(np.arange(700, 740), 2), np.arange(740, n)))
+
+
+CASES += [
+    Case("measured_rad_declared_deg", "the measured channel in rad declared deg (completes, warned)",
+         _declared_pair(_on_grid, _with(**{"channels.1.unit": "deg"})), None,
+         extra={"warning": "column 'measured') moves 0.01745 times as far as the truth"}),
+    Case("measured_deg_declared_mrad", "the measured channel in deg declared mrad (completes, "
+         "warned)", _declared_pair(lambda th: np.rad2deg(_on_grid(th)), _with(**{"channels.1.unit": "mrad"})),
+         None, extra={"warning": "is column 'measured' in deg? (set unit: deg)"}),
+    Case("counts_per_rev_off_by_four", "a 4096-count encoder declared 1024 counts per rev "
+         "(completes, warned)",
+         _declared_pair(_counts_4096, _with(**{"channels.1.unit": "counts",
+                                              "channels.1.counts_per_rev": 1024})), None,
+         extra={"warning": "counts_per_rev 1024 declared, 4096 fits"}),
+    Case("pair_time_in_ns", "a truth/measured pair with its time column in ns, declared s "
+         "(completes, warned)", _declared_pair(_on_grid, time_factor=1e9), None,
+         extra={"warning": "is the time column 't' in ns? (set time.unit: ns)"}),
+    Case("pair_rows_written_twice", "a truth/measured pair whose logger wrote 40 rows twice "
+         "(collapsed, completes, warned)", _declared_pair(_on_grid, rows=_twice), None,
+         extra={"report": {"n_repeated": 40}, "warning": "repeated time stamps: 40 rows of"}),
 ]

@@ -41,8 +41,9 @@ TABLES = [
      "`make run` and `make test` on a fresh clone, install included."),
     ("performance.csv", "Throughput of the paper-000 stages",
      "Per-stage throughput, time as a ratio to `pyarrow` reading the same file (same run), peak "
-     "memory of the streamed long-log path (`bench_performance.py`), and the per-log cost of "
-     "Snakemake jobs in a batch (`bench_batch.py`)."),
+     "memory of the streamed long-log path (`bench_performance.py`), the per-log cost of "
+     "Snakemake jobs in a batch (`bench_batch.py`), and the peak memory of the whole workflow on "
+     "one long truth/measured log (section `workflow`, `bench_memory.py`)."),
     ("lrde_summary.csv", "Low-resolution encoder: accuracy and calibration",
      "Posterior and baseline estimators of paper 002 over simulated draws (`bench_lrde.py`)."),
     ("lrde_effects_summary.csv", "Low-resolution encoder: effects named and intervals kept",

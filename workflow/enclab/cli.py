@@ -196,7 +196,7 @@ def _common(parser: argparse.ArgumentParser) -> None:
                         "Snakemake arguments after --, e.g. -- --dry-run")
     time = parser.add_argument_group("time base")
     time.add_argument("--time", default="t", metavar="COL", help="time column (default: t)")
-    time.add_argument("--time-unit", default="s", choices=["s", "ms", "us", "samples"],
+    time.add_argument("--time-unit", default="s", choices=["s", "ms", "us", "ns", "samples"],
                       help="unit of the time column (default: s)")
     time.add_argument("--rate", type=float, metavar="HZ",
                       help="sample rate: instead of a time column, or with --time-unit samples")

@@ -33,23 +33,39 @@ __all__ = [
     "SLOW_RATE_HZ",
     "TIME_UNITS",
     "UNIT_FACTORS",
+    "available_memory_bytes",
     "canonicalize",
+    "check_text_memory",
     "detect_grid",
     "off_grid",
+    "collapse_repeats",
+    "scale_ratio",
     "time_base_warnings",
     "time_report",
+    "unit_factor_warnings",
     "unwrap_counter",
 ]
 
 # Factor from each file unit to SI (rad or m).
 UNIT_FACTORS = {"rad": 1.0, "deg": math.pi / 180.0, "mrad": 1e-3, "m": 1.0, "mm": 1e-3}
-TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 GRID_TOLERANCE = 0.01  # values must sit on a grid within 1 % of a step (schema: native_step)
 RATE_TOLERANCE = 0.05  # median step vs nominal_rate_hz (schema: nominal_rate_hz)
 GAP_FACTOR = 1.5  # a time step longer than this many median steps is a gap (missed samples)
 # Below this rate a log of a moving encoder is far more often a time column in ms (or a wrong
-# rate) than a real recording: a warning in summary.json, not an error.
+# rate) than a real recording: a warning in summary.json, not an error. Above FAST_RATE_HZ it is
+# far more often a time column in s declared in a finer unit.
 SLOW_RATE_HZ = 10.0
+FAST_RATE_HZ = 1e5
+# Two channels of one joint whose least-squares scale is within this relative distance of a
+# factor between units (deg/rad, mrad, m/mm, a power of two of counts per revolution) are
+# declared in the wrong unit: a physical scale error (a gear ratio, a counts-per-rev slip of a
+# few counts) is a few percent at most, and no unit factor lies within 2 % of another or of 1.
+UNIT_FACTOR_TOLERANCE = 0.02
+# ... and only when one explains the other: r^2 of the least-squares fit at least this (two
+# encoders of one joint track each other to a small fraction of the motion).
+UNIT_FACTOR_MIN_R2 = 0.99
+MAX_POWER_OF_TWO = 24
 
 
 def unwrap_counter(counts: np.ndarray, wrap_bits: int) -> np.ndarray:
@@ -179,14 +195,21 @@ def time_report(t: np.ndarray, nominal_rate_hz: float | None = None, *,
     }
 
 
-_FINER_UNIT = {"s": "ms", "ms": "us"}
+def _fitting_time_units(fs: float, unit: str) -> list[str]:
+    """Time units under which a column read as ``unit`` at ``fs`` Hz samples at a plausible rate
+    (:data:`SLOW_RATE_HZ` .. :data:`FAST_RATE_HZ`), closest to 1 kHz first."""
+    rates = {u: fs * TIME_UNITS[unit] / factor for u, factor in TIME_UNITS.items() if u != unit}
+    fits = [u for u, rate in rates.items() if SLOW_RATE_HZ <= rate <= FAST_RATE_HZ]
+    return sorted(fits, key=lambda u: abs(math.log10(rates[u] / 1e3)))
 
 
-def time_base_warnings(report: dict, time_spec: dict) -> list[str]:
+def time_base_warnings(report: dict, time_spec: dict, file: str | None = None) -> list[str]:
     """Warnings about a time base that is implausible for a moving encoder.
 
-    A log whose median rate is below :data:`SLOW_RATE_HZ` is far more often a time column in
-    ms declared as s (1 kHz read as 1 Hz) than a real recording; the warning names the key
+    A log whose median rate is below :data:`SLOW_RATE_HZ` or above :data:`FAST_RATE_HZ` is far
+    more often a time column in another unit than a real recording (ms or ns declared as s:
+    1 kHz read as 1 Hz or 1 uHz; s declared as ms: 1 kHz read as 1 MHz); the warning names the
+    units (of ``s``, ``ms``, ``us``, ``ns``) under which the rate becomes plausible, and the key
     that would fix it. Call it only for logs with a truth or measured channel that moves.
 
     Parameters
@@ -195,6 +218,8 @@ def time_base_warnings(report: dict, time_spec: dict) -> list[str]:
         :func:`time_report` of the log.
     time_spec : dict
         The entry's normalised ``time`` block.
+    file : str, optional
+        The data file, named in the warning.
 
     Returns
     -------
@@ -202,19 +227,176 @@ def time_base_warnings(report: dict, time_spec: dict) -> list[str]:
         One line per warning (empty when the time base is plausible).
     """
     fs = float(report["fs_hz"])
-    if not fs < SLOW_RATE_HZ:
+    if SLOW_RATE_HZ <= fs <= FAST_RATE_HZ:
         return []
     unit = time_spec.get("unit")
+    fix = "check time.rate_hz"
     if "column" in time_spec or "file" in time_spec:
         source = f"time column '{time_spec['column']}'" if "column" in time_spec else "time file"
-        if unit in _FINER_UNIT:
-            fix = f"is the {source} in {_FINER_UNIT[unit]}? (set time.unit: {_FINER_UNIT[unit]})"
+        fits = _fitting_time_units(fs, unit) if unit in TIME_UNITS else []
+        if len(fits) == 1:
+            fix = f"is the {source} in {fits[0]}? (set time.unit: {fits[0]})"
+        elif fits:
+            rates = " or ".join(f"{u} ({fs * TIME_UNITS[unit] / TIME_UNITS[u]:.3g} Hz)" for u in fits)
+            fix = f"is the {source} in {rates}? (set time.unit: {' or '.join(fits)})"
         else:
             fix = "check time.rate_hz and time.unit"
+    where = f" in {file}" if file else ""
+    if fs < SLOW_RATE_HZ:
+        odd = f"implausibly slow for a moving encoder (below {SLOW_RATE_HZ:g} Hz)"
     else:
-        fix = "check time.rate_hz"
-    return [f"time base: sampled at {fs:.3g} Hz (median step {report['median_dt_s']:.3g} s), "
-            f"implausibly slow for a moving encoder (below {SLOW_RATE_HZ:g} Hz): {fix}"]
+        odd = f"implausibly fast for an encoder log (above {FAST_RATE_HZ:g} Hz)"
+    return [f"time base: sampled at {fs:.3g} Hz (median step {report['median_dt_s']:.3g} s){where}, "
+            f"{odd}: {fix}"]
+
+
+def collapse_repeats(t: np.ndarray) -> np.ndarray:
+    """Indices of the samples kept when rows that repeat the time stamp of the row before are
+    collapsed to the first row of each repeat (``t`` non-decreasing)."""
+    t = np.asarray(t, dtype=np.float64)
+    if t.size == 0:
+        return np.arange(0)
+    return np.concatenate(([0], np.flatnonzero(np.diff(t) != 0) + 1))
+
+
+def _repeat_warning(raw, keep: np.ndarray, repeated: np.ndarray, values: dict) -> str:
+    """One line about the rows dropped by :func:`collapse_repeats` (``repeated``: positions in
+    ``keep`` of the dropped rows; ``values``: each channel's kept-sample values)."""
+    locate = (lambda i: raw.where(int(keep[i]), time=True)) if raw.time is not None else (
+        lambda i: raw.where(int(keep[i])))
+    first = locate(int(repeated[0]))
+    label = first.get("row_label") or "row"
+    rows = [locate(int(i))["row"] for i in repeated[:5]]
+    shown = ", ".join(str(r) for r in rows) + (", ..." if repeated.size > 5 else "")
+    same = all(np.array_equal(v[repeated], v[repeated - 1]) for v in values.values())
+    what = ("each a copy of the row before (a logger that wrote rows twice)" if same else
+            "with other values than the row before (a clock that repeated a stamp)")
+    column = f" column '{first['column']}'" if first.get("column") else ""
+    rows_repeat = "1 row" if repeated.size == 1 else f"{repeated.size} rows"
+    verb = "repeats" if repeated.size == 1 else "repeat"
+    return (f"repeated time stamps: {rows_repeat} of {first['file']}{column} {verb} the time "
+            f"stamp of the row before ({label} {shown}), {what}; collapsed to the first row of each "
+            f"repeat")
+
+
+def scale_ratio(reference: np.ndarray, other: np.ndarray) -> tuple[float, float] | None:
+    """Least-squares scale of ``other`` on ``reference`` after removing both means, and its r^2.
+
+    Removing the means makes the scale blind to an offset between the channels (an encoder's
+    zero); the sums run in float64 over mean-free values. Returns None when ``reference`` or
+    ``other`` does not move.
+    """
+    x = np.asarray(reference, dtype=np.float64)
+    y = np.asarray(other, dtype=np.float64)
+    x = x - x.mean()
+    y = y - y.mean()
+    sxx, syy, sxy = float(np.dot(x, x)), float(np.dot(y, y)), float(np.dot(x, y))
+    if sxx <= 0 or syy <= 0:
+        return None
+    return sxy / sxx, sxy * sxy / (sxx * syy)
+
+
+_ANGLE_UNITS = ("rad", "deg", "mrad")
+_LENGTH_UNITS = ("m", "mm")
+
+
+def _near(ratio: float, factor: float) -> bool:
+    return abs(ratio / factor - 1.0) <= UNIT_FACTOR_TOLERANCE
+
+
+def _unit_fix(ratio: float, channel: dict, column: str) -> str | None:
+    """How the declaration of ``channel`` would remove a scale ``ratio`` (channel / reference),
+    or None when the ratio is no unit factor for that channel."""
+    unit = channel["unit"]
+    if unit == "counts":
+        k = round(math.log2(ratio)) if ratio > 0 else 0
+        if k != 0 and abs(k) <= MAX_POWER_OF_TWO and _near(ratio, 2.0 ** k):
+            factor = f"2^{k}" if k > 0 else f"1/2^{-k}"
+            if channel.get("counts_per_rev") is not None:
+                fitted = float(channel["counts_per_rev"]) * 2.0 ** k
+                return (f"{factor}, a power of two: counts_per_rev {channel['counts_per_rev']:g} "
+                        f"declared, {fitted:g} fits (or a gear_ratio {2.0 ** k:g} times the declared)")
+            return f"{factor}, a power of two: step {channel['step']:g} declared, {channel['step'] / 2.0 ** k:g} fits"
+        return None
+    family = _ANGLE_UNITS if unit in _ANGLE_UNITS else _LENGTH_UNITS
+    for fits in family:
+        if fits != unit and _near(ratio, UNIT_FACTORS[unit] / UNIT_FACTORS[fits]):
+            factor = UNIT_FACTORS[unit] / UNIT_FACTORS[fits]
+            shown = f"{factor:.6g}" if factor >= 1 else f"1/{1 / factor:.6g}"
+            return f"{shown} = {fits} declared as {unit}: is column '{column}' in {fits}? (set unit: {fits})"
+    return None
+
+
+def unit_factor_warnings(stored: dict, metas: dict, channels: list, raw) -> list[str]:
+    """Warnings about channels of one joint whose scale against the joint's truth is a unit factor.
+
+    For each joint with a truth channel, every other truth or measured channel of the joint is
+    fitted to it by :func:`scale_ratio` (SI values, signs applied). A scale within
+    :data:`UNIT_FACTOR_TOLERANCE` of a factor between units (57.2958 or 1/57.2958 for deg/rad,
+    1000 or 1/1000 for mrad/rad and mm/m, 17.4533 for deg/mrad, a power of two for a counts
+    channel) with r^2 >= :data:`UNIT_FACTOR_MIN_R2` is a declaration error, not a physical
+    scale: the residual stage would report it as a 98 % scale mismatch. The warning names the
+    file, both channels and columns, the factor and the unit (or counts_per_rev) that fits.
+
+    Parameters
+    ----------
+    stored : dict
+        Stored column (int64 counts or float64 SI) by channel name.
+    metas : dict
+        Channel metadata (``storage``, ``step``) by channel name.
+    channels : list of dict
+        The entry's normalised channels.
+    raw : enclab.core.readers.RawLog
+        For the file and column names.
+
+    Returns
+    -------
+    list of str
+        One line per channel whose scale is a unit factor.
+    """
+    def si(name):
+        meta = metas[name]
+        values = stored[name]
+        return values * meta["step"] if meta["storage"] == "counts" else values
+
+    warnings = []
+    joints: dict = {}
+    for channel in channels:
+        if channel["role"] in ("truth", "measured"):
+            joints.setdefault(channel["joint"], []).append(channel)
+    for joint, members in joints.items():
+        truths = [c for c in members if c["role"] == "truth"]
+        if not truths:
+            continue
+        reference = truths[0]
+        for channel in members:
+            if channel is reference:
+                continue
+            fit = scale_ratio(si(reference["name"]), si(channel["name"]))
+            if fit is None or fit[1] < UNIT_FACTOR_MIN_R2:
+                continue
+            ratio = abs(fit[0])
+            column, ref_column = raw.columns[channel["name"]], raw.columns[reference["name"]]
+            fix = _unit_fix(ratio, channel, column)
+            if fix is None:
+                continue
+            warnings.append(
+                f"unit factor: in {raw.file}, channel '{channel['name']}' (column '{column}') moves "
+                f"{ratio:.4g} times as far as the truth '{reference['name']}' (column '{ref_column}') "
+                f"of joint {joint}, a declaration error rather than a physical scale; factor {fix}")
+    return warnings
+
+
+def _unit_hint(measured_hz: float, nominal_hz: float, spec: dict) -> str:
+    """`` (the stamps fit time.unit: X)`` when another time unit gives the nominal rate."""
+    unit = spec.get("unit")
+    if unit not in TIME_UNITS:
+        return ""
+    for other, factor in TIME_UNITS.items():
+        rate = measured_hz * TIME_UNITS[unit] / factor
+        if other != unit and abs(rate - nominal_hz) <= RATE_TOLERANCE * nominal_hz:
+            return f" (the stamps fit time.unit: {other})"
+    return ""
 
 
 def _time_base(raw, entry: dict) -> tuple[np.ndarray, float | None]:
@@ -309,8 +491,9 @@ def _check_plausible(stored: np.ndarray, meta: dict, channel: dict, raw) -> None
 def canonicalize(raw, entry: dict, devices: dict) -> tuple[pd.DataFrame, dict]:
     """Convert a raw log to the canonical DataFrame and its metadata.
 
-    Steps: time base (column in s/ms/us/samples, ``rate_hz``, or time file), crop, timestamp
-    checks, unit conversion to SI with the channel's sign, counter unwrap (``wrap_bits``),
+    Steps: time base (column in s/ms/us/ns/samples, ``rate_hz``, or time file), crop, timestamp
+    checks, collapse of rows that repeat the time stamp of the row before (the first is kept,
+    a warning names the rows), unit conversion to SI with the channel's sign, counter unwrap (``wrap_bits``),
     and integer storage of counts channels and of float channels on a declared
     (``native_step``) or detected grid.
 
@@ -331,8 +514,10 @@ def canonicalize(raw, entry: dict, devices: dict) -> tuple[pd.DataFrame, dict]:
         ``log_id``, ``source`` {file, sha256 (None; set by :func:`enclab.core.ingest.ingest_log`),
         format}, ``fs_hz``, ``n_samples``, ``device``, ``group``, ``tags``, ``time_report``
         (see :func:`time_report`), ``channels`` [{name, role, joint, unit, storage, step,
-        native_step}], ``analysis``, ``warnings`` (lines about odd but usable input, e.g.
-        :func:`time_base_warnings`; summary.json carries them).
+        native_step}], ``analysis``, ``warnings`` (lines about odd but usable input:
+        :func:`time_base_warnings`, repeated time stamps, :func:`unit_factor_warnings`;
+        summary.json carries them). ``time_report`` also lists ``repeated_rows`` (file rows of
+        the first 20 repeated stamps).
 
     Raises
     ------
@@ -368,6 +553,8 @@ def canonicalize(raw, entry: dict, devices: dict) -> tuple[pd.DataFrame, dict]:
     spec = entry["time"]
     report = time_report(t, spec.get("nominal_rate_hz"), trailing_empty_dropped=raw.trailing_empty_dropped,
                          rate_hz=synthetic_rate)
+    kept = collapse_repeats(t)
+    repeated = np.setdiff1d(np.arange(t.size), kept) if kept.size < t.size else np.arange(0)
     if report["median_dt_s"] <= 0:
         raise EnclabInputError(raw.time_file or raw.file, "every time stamp is the same", column=raw.time_column,
                                expected="increasing time stamps")
@@ -380,21 +567,41 @@ def canonicalize(raw, entry: dict, devices: dict) -> tuple[pd.DataFrame, dict]:
                 f"median time step {report['median_dt_s']:.6g} s is {measured:.6g} Hz, not the nominal "
                 f"{nominal:.6g} Hz", column=raw.time_column, key="time.nominal_rate_hz",
                 expected=f"within {RATE_TOLERANCE:.0%} of nominal_rate_hz",
-                hint="Check time.unit (s, ms, us, samples) and nominal_rate_hz.",
+                hint="Check time.unit (s, ms, us, ns, samples) and nominal_rate_hz"
+                + _unit_hint(measured, nominal, spec) + ".",
             )
+
+    values_of = {}
+    for channel in entry["channels"]:
+        values = raw.channels[channel["name"]][keep]
+        require_finite(values, raw, raw.columns[channel["name"]], index=keep)
+        values_of[channel["name"]] = values
+    warnings = []
+    if repeated.size:
+        # Rows that repeat the stamp of the row before are one sample: the first is kept (the
+        # docs, your-logs.md); time_report keeps the file's count and their rows.
+        warnings.append(_repeat_warning(raw, keep, repeated, values_of))
+        report["repeated_rows"] = [int(raw.where(int(keep[i]), time=raw.time is not None)["row"])
+                                   for i in repeated[:20]]
+        t, keep = t[kept], keep[kept]
+        values_of = {name: v[kept] for name, v in values_of.items()}
+    else:
+        report["repeated_rows"] = []
 
     columns = {"t": t.astype(np.float64)}
     channel_meta = []
     for channel in entry["channels"]:
-        values = raw.channels[channel["name"]][keep]
-        require_finite(values, raw, raw.columns[channel["name"]], index=keep)
-        stored, meta = _convert_channel(values, channel, raw, keep)
+        stored, meta = _convert_channel(values_of.pop(channel["name"]), channel, raw, keep)
         _check_plausible(stored, meta, channel, raw)
         columns[channel["name"]] = stored
         channel_meta.append(meta)
-    df = pd.DataFrame(columns)
     moving = any(c["role"] in ("truth", "measured") for c in entry["channels"])
-    warnings = time_base_warnings(report, spec) if moving else []
+    if moving:
+        warnings = time_base_warnings(report, spec, raw.time_file or raw.file) + warnings
+        warnings += unit_factor_warnings(columns, {m["name"]: m for m in channel_meta},
+                                         entry["channels"], raw)
+    df = pd.DataFrame(columns, copy=False)
+    del columns
 
     device = entry.get("device")
     if isinstance(device, str):
@@ -420,11 +627,59 @@ def canonicalize(raw, entry: dict, devices: dict) -> tuple[pd.DataFrame, dict]:
     return df, meta
 
 
+# Peak memory of reading a text log, per byte of its (uncompressed) text: 5.3 measured for a
+# 158 MB, 3e6-row CSV (workflow/benchmarks/bench_memory.py), rounded up.
+TEXT_READ_BYTES_PER_BYTE = 6.0
+
+
+def available_memory_bytes() -> int | None:
+    """``MemAvailable`` of ``/proc/meminfo`` (bytes), or None where there is no such file."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as handle:
+            for line in handle:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
+
+def check_text_memory(entry: dict, data_root: str | os.PathLike) -> None:
+    """Refuse, with one line, a text log whose reading would need more memory than is free.
+
+    Reading a CSV or text export holds its lines as Python strings (about
+    :data:`TEXT_READ_BYTES_PER_BYTE` bytes per byte of text); a log too large for that is
+    refused before it is read, instead of the job being killed by the system. A gzip file is
+    judged by its uncompressed size (the last four bytes, modulo 4 GiB).
+    """
+    if entry["format"] not in ("csv", "text"):
+        return
+    path = Path(data_root) / entry["file"]
+    try:
+        size = path.stat().st_size
+        with open(path, "rb") as handle:
+            if handle.read(2) == b"\x1f\x8b":
+                handle.seek(-4, os.SEEK_END)
+                size = max(size, int.from_bytes(handle.read(4), "little"))
+    except OSError:
+        return  # the reader names the file's problem
+    need, free = TEXT_READ_BYTES_PER_BYTE * size, available_memory_bytes()
+    if free is not None and need > free:
+        raise EnclabInputError(
+            str(path), f"{size / 1e9:.2f} GB of text needs about {need / 1e9:.1f} GB of memory to "
+            f"read, {free / 1e9:.1f} GB are available", expected="a log that fits in memory",
+            hint="Convert it to Parquet (one float64 or int64 column per channel: about 8 bytes "
+            "per value to read), or split it into several logs; see docs/long-logs.md.")
+
+
 def ingest_log(entry: dict, data_root: str | os.PathLike, devices: dict) -> tuple[pd.DataFrame, dict]:
     """Read one log and convert it to the canonical form (see :func:`canonicalize`).
 
-    Also records the SHA-256 of the data file in ``meta["source"]["sha256"]``.
+    A text log too large to read in the memory available is refused first
+    (:func:`check_text_memory`). Also records the SHA-256 of the data file in
+    ``meta["source"]["sha256"]``.
     """
+    check_text_memory(entry, data_root)
     raw = read_raw(entry, data_root)
     df, meta = canonicalize(raw, entry, devices)
     meta["source"]["sha256"] = file_sha256(Path(data_root) / entry["file"])

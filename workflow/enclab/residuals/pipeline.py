@@ -138,6 +138,29 @@ def verdict(explained, after_over_floor) -> str:
     return f"unexplained (after/floor {ratio})"
 
 
+# Peak memory of the residual stage per sample of a truth/measured pair: 1.41 GB for 3e6
+# samples (workflow/benchmarks/bench_memory.py; the selection's context, the exact model's
+# floor probabilities and the figures), rounded up.
+RESIDUAL_BYTES_PER_SAMPLE = 500.0
+
+
+def check_memory(n_samples: int, meta: Mapping) -> None:
+    """Refuse, with one line, a log whose residual stage would need more memory than is free
+    (about :data:`RESIDUAL_BYTES_PER_SAMPLE` per sample), instead of being killed by the system."""
+    from enclab.core.errors import EnclabInputError
+    from enclab.core.ingest import available_memory_bytes
+
+    need, free = RESIDUAL_BYTES_PER_SAMPLE * n_samples, available_memory_bytes()
+    if free is not None and need > free:
+        raise EnclabInputError(
+            (meta.get("source") or {}).get("file") or meta.get("log_id"),
+            f"{n_samples:,} samples need about {need / 1e9:.1f} GB of memory in the residual "
+            f"stage, {free / 1e9:.1f} GB are available", key="crop",
+            expected="a log that fits in memory",
+            hint="Crop the log (crop: t_start/t_end) or split it into several logs, each a "
+            "run of its own.")
+
+
 def analyse_channel(df: pd.DataFrame, meta: Mapping, pair: Mapping, settings: Mapping | None = None,
                     selector: Callable | None = None) -> tuple[dict, dict, pd.DataFrame]:
     """Residual of one measured channel against the exact model, before and after the effects.
@@ -177,6 +200,7 @@ def analyse_channel(df: pd.DataFrame, meta: Mapping, pair: Mapping, settings: Ma
 
     cfg = _settings(settings)
     log_id = meta.get("log_id", "?")
+    check_memory(len(df), meta)
     t = df["t"].to_numpy(dtype=np.float64)
     truth, truth_step = channel_values(df, meta, pair["truth"])
     measured, step = channel_values(df, meta, pair["measured"])

@@ -725,8 +725,15 @@ def _floor_probs(mu, half, sigma, js):
 
         return np.clip(sg / (2 * half) * (G((d + half) / sg) - G((d - half) / sg)), 0.0, 1.0)
 
-    probs = [cdf(j + 1) - cdf(j) for j in js]
-    return np.array(probs)
+    # filled row by row (a list of rows and its copy would hold the table twice: 0.5 GB for a
+    # 3e6-sample log); each cdf is computed once and is the lower edge of the next row
+    probs = np.empty((len(js), np.size(mu)))
+    lower = cdf(js[0])
+    for i, j in enumerate(js):
+        upper = cdf(j + 1)
+        probs[i] = upper - lower
+        lower = upper
+    return probs
 
 
 def _block_se(d, groups) -> float:
@@ -763,8 +770,13 @@ def residual_stats(fitted: _Fitted, ctx) -> dict:
     reach = int(math.ceil(half + 7.0 * float(np.max(sigma)))) + 2
     js = np.arange(-reach, reach + 1)
     P = _floor_probs(mu, half, sigma, js)
-    er = ctx.step * (js[:, None] * P).sum(axis=0)
-    er2 = ctx.step**2 * ((js[:, None] ** 2) * P).sum(axis=0)
+    # row by row, in the order of a sum over axis 0 (no temporary of the table's size)
+    er, er2 = np.zeros(P.shape[1]), np.zeros(P.shape[1])
+    for j, p in zip(js, P):
+        er += j * p
+        er2 += j**2 * p
+    er *= ctx.step
+    er2 *= ctx.step**2
     # a variance: rounding can take a floor of zero a hair below it
     floor_var = max(float(er2.mean() - er.mean() ** 2), 0.0)
     var = float(r.var())
