@@ -131,3 +131,21 @@ def test_closed_loop_missed_count_moves_the_motion_not_the_readings():
     # to cycle wander of the bias (a few hundredths of a step).
     assert theta[after].mean() - theta[before].mean() == pytest.approx(STEP, abs=0.1 * STEP)
     assert counts[after].mean() == pytest.approx(counts[before].mean(), abs=0.1)
+
+
+def test_bias_figure_draws_the_fitted_motion_beside_the_truth():
+    from enclab.lrde import dwell, plots
+
+    df, p = simulate.closed_loop_pid_log(np.random.default_rng(2), n_cycles=12, offset_frac=0.3,
+                                         truth_step=STEP / 100)
+    t, counts = df["t"].to_numpy(), df["counts"].to_numpy()
+    cycles = dwell.cycle_table(counts, t, STEP, f_hz=20.0)
+    truth = plots.truth_bias_deviation(t, df["truth_counts"].to_numpy() * STEP / 100, 20.0,
+                                       STEP, p["offset_a"], 0)
+    e_b = {"median": 0.01 * STEP, "q05": -0.02 * STEP, "q95": 0.04 * STEP}
+    fig = plots.bias_cycles_plot(cycles, STEP, truth, fitted={"E_b": e_b, "label": "fourier6"})
+    labels = [line.get_label() for line in fig.axes[0].get_lines()]
+    assert any("fitted motion (fourier6" in x for x in labels)
+    assert any("true angle" in x for x in labels)
+    fitted = next(line for line in fig.axes[0].get_lines() if "fitted" in line.get_label())
+    np.testing.assert_allclose(fitted.get_ydata(), np.rad2deg(e_b["median"]))

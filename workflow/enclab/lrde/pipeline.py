@@ -19,9 +19,10 @@ Settings keys (all optional): ``channel``, ``requantize``, ``use_truth``, ``rest
 the chains go on until they converge, up to this many steps), ``n_burn`` (100),
 ``ppc_draws`` (40), ``sigma_range_steps`` (prior range of the jitter in steps) and
 ``sigma_prior`` (``"uniform"`` or ``"log-uniform"``), see
-:func:`enclab.lrde.fit.fit_sinusoid`; ``motion_models`` (candidate motion models compared on held-out
-cycles, :func:`enclab.lrde.motion.motion_model`: lists of harmonic orders or ``"fourier<K>"``,
-default :data:`DEFAULT_MOTION_MODELS`; ``[]`` turns the comparison off) and ``effects`` (encoder and clock effects compared with them, default
+:func:`enclab.lrde.fit.fit_sinusoid`; ``motion_models`` (candidate motion models compared
+on held-out cycles, :func:`enclab.lrde.motion.motion_model`: lists of harmonic orders or
+``"fourier<K>"``, default :data:`DEFAULT_MOTION_MODELS`; ``[]`` turns the comparison off) and
+``effects`` (encoder and clock effects compared with them, default
 all of :data:`enclab.lrde.effects.EFFECTS`), ``effect_pairs`` (also try the winner plus each
 other passing term, default True), ``trust_z`` (threshold of the predictive check, default -4),
 ``local_z`` (threshold of the localized check, default -5),
@@ -54,9 +55,11 @@ __all__ = ["select_channels", "analyse_lrde_log"]
 
 _log = logging.getLogger(__name__)
 
-#: Candidate motion models of the held-out comparison (``motion_models``): the sinusoid, a
-#: 2nd or a 3rd harmonic, and Fourier series of free shape (:mod:`enclab.lrde.motion`).
-DEFAULT_MOTION_MODELS = ([], [2], [3], "fourier4", "fourier6")
+#: Candidate motion models of the held-out comparison when ``motion_models`` is not given:
+#: the sinusoid and a 2nd or a 3rd harmonic. The workflow's configuration adds Fourier series
+#: of free shape (``fourier4``, ``fourier6``, :mod:`enclab.lrde.motion`) for motions set by a
+#: control loop; each candidate costs the stage two point fits or more.
+DEFAULT_MOTION_MODELS = ([], [2], [3])
 
 _KNOWN_SETTINGS = {"channel", "requantize", "use_truth", "rest_position", "f_hz", "n_ensembles",
                    "n_walkers", "n_steps", "max_steps", "n_burn", "ppc_draws", "sigma_range_steps",
