@@ -23,7 +23,7 @@ def test_labels_and_configuration():
     assert motion.motion_model([3]).label == "harmonic3"
     assert motion.motion_model([2, 3]).label == "harmonic2+harmonic3"
     four = motion.motion_model("fourier4")
-    assert four.harmonics == (2, 3, 4) and four.polish
+    assert four.harmonics == (2, 3, 4) and four.gradient_point_fit
     assert motion.from_harmonics((2, 3, 4)) == four
     assert effects.model_label((2, 3, 4, 5, 6), ("hysteresis",)) == "fourier6+hysteresis"
     for bad in ("fourier", "harmonic3", [3, 2], [1]):

@@ -337,6 +337,9 @@ class FitResult:
         Peak-to-peak stroke of the motion per sample when harmonics distort it
         (:func:`enclab.lrde.model.stroke_and_midpoint`), else None: the ``A12`` column, twice
         the fundamental's amplitude, is then the stroke itself.
+    midpoint_samples : numpy.ndarray or None
+        With harmonics, the midpoint of the motion's turning points about its mean per sample
+        (what ``E_b`` and ``a_eq`` add to the sampled ``E_b`` column), else None.
     """
 
     param_names: tuple
@@ -361,6 +364,7 @@ class FitResult:
     settings: dict = field(default_factory=dict)
     b_samples: np.ndarray | None = None
     stroke_samples: np.ndarray | None = None
+    midpoint_samples: np.ndarray | None = None
 
     def take(self, rows) -> "FitResult":
         """The same posterior restricted to the sample rows ``rows`` (per-sample arrays alike;
@@ -368,7 +372,8 @@ class FitResult:
         per_sample = {k: (None if v is None else v[rows])
                       for k, v in (("samples", self.samples), ("a_eq_samples", self.a_eq_samples),
                                    ("b_samples", self.b_samples),
-                                   ("stroke_samples", self.stroke_samples))}
+                                   ("stroke_samples", self.stroke_samples),
+                                   ("midpoint_samples", self.midpoint_samples))}
         return FitResult(**{**self.__dict__, **per_sample})
 
     @property
@@ -801,7 +806,7 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
     # a_eq and E_b move by the turning points' midpoint about the mean (0 for a sine).
     a_eq = (centre + 0.5) * step + samples[:, 1] + midpoint
     summary["a_eq"] = _quantiles(a_eq)
-    summary["E_b"] = _quantiles(a_eq - (centre + 0.5) * step)
+    summary["E_b"] = _quantiles(samples[:, 1] + midpoint)
     _report_stroke(summary, stroke)
     offset_a = bias_b = b_draws = None
     reason = _UNIDENTIFIED
@@ -854,6 +859,7 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
                   "harmonics": list(harmonics), "effects": list(effects),
                   "extra_scale": list(setup["extra_scale"]), "sigma_prior": sigma_prior},
         b_samples=b_draws, stroke_samples=stroke,
+        midpoint_samples=None if stroke is None else midpoint,
     )
 
 
@@ -923,7 +929,9 @@ def pool_fits(fits) -> FitResult:
     a_eq = np.concatenate([f.a_eq_samples[i] for f, i in zip(fits, picks)])
     summary = {name: _quantiles(samples[:, j]) for j, name in enumerate(names)}
     summary["a_eq"] = _quantiles(a_eq)
-    summary["E_b"] = _quantiles(a_eq - (first.centre_count + 0.5) * first.step)
+    midpoint = np.concatenate([np.zeros(i.size) if f.midpoint_samples is None
+                               else f.midpoint_samples[i] for f, i in zip(fits, picks)])
+    summary["E_b"] = _quantiles(samples[:, 1] + midpoint)
     stroke = None
     if any(f.stroke_samples is not None for f in fits):
         stroke = np.concatenate([f.stroke[i] for f, i in zip(fits, picks)])
@@ -947,7 +955,8 @@ def pool_fits(fits) -> FitResult:
         wall_time_s=float(sum(f.wall_time_s for f in fits)),
         settings={k: v for k, v in first.settings.items()
                   if k not in ("harmonics", "effects", "extra_scale", "bounds_internal")}
-        | {"pooled": labels}, b_samples=b, stroke_samples=stroke)
+        | {"pooled": labels}, b_samples=b, stroke_samples=stroke,
+        midpoint_samples=None if stroke is None else midpoint)
 
 
 def map_fit(t, counts, step, f_hz=None, harmonics=(), effects=(), start=None,
@@ -1053,7 +1062,7 @@ def map_fit(t, counts, step, f_hz=None, harmonics=(), effects=(), start=None,
         return minimize(objective, x, method="L-BFGS-B", bounds=list(zip(lo, hi)),
                         options={"maxfun": int(4 * max_evals)})
 
-    if lrde_motion.from_harmonics(setup["harmonics"]).polish:
+    if lrde_motion.from_harmonics(setup["harmonics"]).gradient_point_fit:
         # Many shape columns (a Fourier series): a simplex in that many dimensions stops far
         # from the optimum within its budget, a gradient method does not (the likelihood is
         # smooth in the coefficients at a jitter of a few hundredths of a step).

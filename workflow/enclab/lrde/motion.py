@@ -19,8 +19,8 @@ coefficients start and how its point fit is refined. The likelihoods
     A motion of free periodic shape: every order ``2 .. K`` (``fourierK``), for a motion
     set by a control loop (paper 002's own setting), whose shape follows the gains, the
     steps and the reference rather than a sine. Its coefficients start at the least-squares
-    fit of the readings on the series, and its point fit ends with a gradient (L-BFGS-B)
-    refinement: with ``2 (K - 1)`` extra columns a simplex alone stops far from the optimum.
+    fit of the readings on the series, and its point fit is a gradient method (L-BFGS-B): with
+    ``2 (K - 1)`` extra columns a simplex stops far from the optimum within its budget.
     Signature when present and not modelled: dwell ends early or late at fixed places of the
     cycle, every cycle, at several counts at once (the misfit trace's dwell rows).
 
@@ -46,14 +46,14 @@ __all__ = ["MotionModel", "Sinusoid", "Harmonics", "FourierSeries", "motion_mode
 class MotionModel(ABC):
     """A periodic motion model: the orders it adds to the fundamental and how it starts.
 
-    Subclasses set :attr:`harmonics` and :attr:`label`; :meth:`start` and :attr:`polish`
-    have defaults (coefficients at 0, no gradient refinement).
+    Subclasses set :attr:`harmonics` and :attr:`label`; :meth:`start` and
+    :attr:`gradient_point_fit` have defaults (coefficients at 0, the simplex point fit).
     """
 
     #: Orders ``k >= 2`` added to the fundamental, increasing.
     harmonics: tuple = ()
-    #: The point fit ends with a gradient refinement (:func:`enclab.lrde.fit.map_fit`).
-    polish: bool = False
+    #: The point fit runs L-BFGS-B instead of Nelder-Mead (:func:`enclab.lrde.fit.map_fit`).
+    gradient_point_fit: bool = False
 
     @property
     @abstractmethod
@@ -109,7 +109,7 @@ class FourierSeries(MotionModel):
         Highest order (>= 2).
     """
 
-    polish = True
+    gradient_point_fit = True
 
     def __init__(self, order) -> None:
         if isinstance(order, bool) or not isinstance(order, (int, np.integer)) or order < 2:
