@@ -19,9 +19,10 @@ rounding channel of step/100 reads the motion.
 The fine channel's values are those of the docs' definitions for a motion that is not a
 sinusoid: ``A12`` the mean over the log's cycles (of the reference) of ``max - min`` of the
 true angle (and, recorded beside it, ``max - min`` of the cycle-averaged true angle, the
-stroke of the periodic part a periodic model describes), the bias ``b`` the mean of ``(max + min) / 2``, and ``E_b = a + b - (m + 1/2)
-step`` in the frame of the fit's centre count ``m`` (with a missed count the counter's
-offset after it, so that both segments share the readings' frame). Per draw the stage runs as
+stroke of the periodic part a periodic model describes), the bias ``b`` the mean of
+``(max + min) / 2``, and ``E_b = a + b - (m + 1/2) step`` in the frame of the fit's centre
+count ``m`` (with a missed count the counter's offset after it, so that both segments share
+the readings' frame). Per draw the stage runs as
 ``make run`` runs it (:func:`enclab.lrde.pipeline.analyse_lrde_log`, the ``lrde`` settings of
 ``config.yaml``, 2 processes) and records the chosen model, whether its 90 % intervals of
 ``A12`` and ``E_b`` hold the fine channel's values, whether the stage flags them untrusted,
