@@ -172,7 +172,8 @@ def main(argv=None):
     ap.add_argument("--gains", nargs="+", default=list(GAINS), choices=list(GAINS))
     ap.add_argument("--effects", nargs="+", default=list(EFFECTS), choices=EFFECTS)
     ap.add_argument("--cycles", type=int, nargs="+", default=[20])
-    ap.add_argument("--draws", type=int, default=100, help="draws per cell")
+    ap.add_argument("--draws", type=int, default=100, help="draws per cell (index to stop at)")
+    ap.add_argument("--first-draw", type=int, default=0)
     ap.add_argument("--seed", type=int, default=20261204)
     ap.add_argument("--shard", default="0/1", metavar="K/N",
                     help="run the draws whose running index is K modulo N")
@@ -194,7 +195,7 @@ def main(argv=None):
         settings.pop("seed")
         jobs = [(g, e, c, args.seed + 100_000 * EFFECTS.index(e) + 10_000 * list(GAINS).index(g)
                  + 1000 * c + i)
-                for i in range(args.draws) for c in args.cycles for g in args.gains
+                for i in range(args.first_draw, args.draws) for c in args.cycles for g in args.gains
                 for e in args.effects]
         rows = []
         path = out / (f"lrde_closed_loop_draws_{k}of{n}.csv" if n > 1
