@@ -69,6 +69,11 @@ TABLES = [
     ("lrde_truth_loop.csv", "Low-resolution encoder: the truth channel's findings in the fit",
      "Hysteresis logs with a fine channel: named by the comparison alone and with the residual "
      "stage's findings, coverage of A12, E_b, a and b before and after (`lrde_truth_loop.py`)."),
+    ("lrde_closed_loop.csv", "Low-resolution encoder: inside a PID loop",
+     "The LRDE stage on closed-loop logs (paper 002 Fig. 5) per cell of gains and encoder "
+     "effect: coverage of the 90 % intervals of A12 (per-cycle stroke of the fine channel, and "
+     "the stroke of its cycle-averaged motion) and E_b, untrusted flags (also on the logs the "
+     "model describes), wall time (`lrde_closed_loop.py`; machine loaded, see the command)."),
     ("lrde_stage.csv", "Low-resolution encoder: stage cost",
      "Wall time of the whole LRDE stage of the embedded logs (`bench_lrde_stage.py`; target 30 s "
      "on 2 cores; `threads` is the stage's processes, 2 in the workflow)."),

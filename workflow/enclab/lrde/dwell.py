@@ -254,6 +254,12 @@ def cycle_table(counts, t, step, f_hz=None) -> pd.DataFrame:
     if np.any(usable):
         A12[usable] = model.dwell_stroke(w1[usable], w2[usable], f_used, step,
                                          steps_pp[usable])
+        # Dwells at the extremes that together last more than half a period
+        # (cos(omega w1) + cos(omega w2) <= 0) fit no sinusoid: eq. (4) has no stroke there
+        # (a motion that lingers at its turning points, as a servo's may).
+        usable &= np.isfinite(A12) & (A12 > 0)
+        A12[~usable] = np.nan
+    if np.any(usable):
         a_eq[usable] = model.dwell_a_eq(w1[usable], w2[usable], f_used, step,
                                         cmax[usable], cmin[usable])
         dc_pred[usable] = model.mean_reading(A12[usable],

@@ -45,6 +45,7 @@ import numpy as np
 from scipy.special import erfc, log_ndtr, logsumexp
 
 from enclab.lrde import model
+from enclab.lrde import motion as lrde_motion
 
 __all__ = ["EFFECTS", "check_effects", "effect_param_names", "effect_bounds", "effect_scales",
            "pointwise_log_likelihood", "log_likelihood", "jump_posterior", "simulate_counts",
@@ -54,8 +55,11 @@ EFFECTS = ("hysteresis", "drift", "count_jump", "time_jitter")
 
 
 def model_label(harmonics, effects) -> str:
-    """``"sinusoid"`` or the terms joined by ``+`` (``"harmonic3"``, ``"hysteresis"``)."""
-    terms = [f"harmonic{k}" for k in harmonics] + list(effects)
+    """``"sinusoid"`` or the terms joined by ``+`` (``"harmonic3"``, ``"fourier6"``,
+    ``"hysteresis"``): the motion's label (:func:`enclab.lrde.motion.from_harmonics`), then
+    the effects."""
+    motion = lrde_motion.from_harmonics(harmonics)
+    terms = ([] if not motion.harmonics else [motion.label]) + list(effects)
     return "+".join(terms) if terms else "sinusoid"
 
 _SIGNATURES = {

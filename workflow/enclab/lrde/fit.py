@@ -15,8 +15,10 @@ standard deviation ``sigma`` is read as ``count = floor((theta + noise + a) / st
 Harmonic distortion (``harmonics``) adds ``c_k cos(k phi) + s_k sin(k phi)``; the sampled
 ``A12`` is then twice the fundamental's amplitude, and the reported ``A12`` is the peak-to-peak
 stroke of the whole motion, eq. (2)'s ``A1 + A2`` (the turning points the readings see).
-``E_b`` and ``a_eq`` stay those of the motion's mean, which is the midpoint of the extremes
-for odd harmonics (and for a sine) but not for even ones.
+``E_b`` and ``a_eq`` refer to the bias of eq. (2), the mean of the motion's turning points
+(per sample: the sampled ``E_b`` column, about the motion's mean, plus the turning points'
+midpoint about it), which is the mean for a sine and odd harmonics but not for even ones;
+the truth channel's ``b`` is moved the same way, so ``a = a_eq - b`` does not change.
 
 Likelihood
 ----------
@@ -75,6 +77,7 @@ from scipy.special import log_ndtr
 
 from enclab.lrde import diagnostics, dwell, model
 from enclab.lrde import effects as lrde_effects
+from enclab.lrde import motion as lrde_motion
 from enclab.lrde.model import _phasor_on_grid, _sine_on_grid, uniform_grid
 
 __all__ = ["PARAM_NAMES", "FitResult", "log_likelihood", "log_probability", "initial_guess",
@@ -311,7 +314,8 @@ class FitResult:
         The same, per ensemble and step (SI units); None for a pooled posterior
         (:func:`pool_fits`).
     a_eq_samples : numpy.ndarray
-        ``a_eq = (centre_count + 1/2) step + E_b`` per sample.
+        ``a_eq = (centre_count + 1/2) step + E_b`` per sample, with ``E_b`` about the mean of
+        the turning points (the sampled column plus their midpoint, see the module notes).
     summary : dict
         Per quantity (``A12, E_b, a_eq, f_hz, phase, sigma`` and, when identified,
         ``offset_a, bias_b``): ``{"median", "q05", "q95"}``.
@@ -333,6 +337,9 @@ class FitResult:
         Peak-to-peak stroke of the motion per sample when harmonics distort it
         (:func:`enclab.lrde.model.stroke_and_midpoint`), else None: the ``A12`` column, twice
         the fundamental's amplitude, is then the stroke itself.
+    midpoint_samples : numpy.ndarray or None
+        With harmonics, the midpoint of the motion's turning points about its mean per sample
+        (what ``E_b`` and ``a_eq`` add to the sampled ``E_b`` column), else None.
     """
 
     param_names: tuple
@@ -357,6 +364,7 @@ class FitResult:
     settings: dict = field(default_factory=dict)
     b_samples: np.ndarray | None = None
     stroke_samples: np.ndarray | None = None
+    midpoint_samples: np.ndarray | None = None
 
     def take(self, rows) -> "FitResult":
         """The same posterior restricted to the sample rows ``rows`` (per-sample arrays alike;
@@ -364,7 +372,8 @@ class FitResult:
         per_sample = {k: (None if v is None else v[rows])
                       for k, v in (("samples", self.samples), ("a_eq_samples", self.a_eq_samples),
                                    ("b_samples", self.b_samples),
-                                   ("stroke_samples", self.stroke_samples))}
+                                   ("stroke_samples", self.stroke_samples),
+                                   ("midpoint_samples", self.midpoint_samples))}
         return FitResult(**{**self.__dict__, **per_sample})
 
     @property
@@ -585,8 +594,11 @@ def _setup(t, counts, step, f_hz, sigma_range, sigma_prior, harmonics, effects,
     ratio = min(1.0, _DISPERSION_CYCLES / max(duration * init["f_hz"], 1.0))
     shrink = np.sqrt(ratio)
     effect_scale = {"hysteresis": 0.01, "time_jitter": 0.02, "drift": 2e-4 / duration * ratio}
+    motion = lrde_motion.from_harmonics(harmonics)
     x0 = np.array([init["A12"] / step, init["E_b"] / step, init["f_hz"], init["phase"],
-                   log_sigma0] + [0.0] * (2 * len(harmonics))
+                   log_sigma0]
+                  + list(motion.start(t, counts, init["centre_count"], init["f_hz"],
+                                      init["phase"], init["t_ref"]))
                   + [effect_x0[n] for n in effect_names])
     # Dispersion of the start: a few tenths of the expected posterior widths, so that
     # independent ensembles start apart and R-hat can detect non-mixing.
@@ -788,10 +800,13 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
     acceptance = sampler.acceptance_fraction
     si = _to_si(internal, step, setup["extra_scale"])
     samples = si.reshape(-1, ndim)
-    a_eq = (centre + 0.5) * step + samples[:, 1]
     summary = {name: _quantiles(samples[:, i]) for i, name in enumerate(names)}
+    stroke, midpoint = _stroke_samples(samples, names, harmonics)
+    # A distorted motion's bias is the mean of its turning points (eq. 2), not its mean:
+    # a_eq and E_b move by the turning points' midpoint about the mean (0 for a sine).
+    a_eq = (centre + 0.5) * step + samples[:, 1] + midpoint
     summary["a_eq"] = _quantiles(a_eq)
-    stroke = _stroke_samples(samples, names, harmonics)
+    summary["E_b"] = _quantiles(samples[:, 1] + midpoint)
     _report_stroke(summary, stroke)
     offset_a = bias_b = b_draws = None
     reason = _UNIDENTIFIED
@@ -813,7 +828,7 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
         batch_means = np.array([chunk.mean() for chunk in np.array_split(resid, n_batches)])
         b_se = float(batch_means.std(ddof=1) / np.sqrt(n_batches))
         rng = np.random.default_rng(root.spawn(1)[0])
-        b_draws = b_hat + b_se * rng.standard_t(n_batches - 1, a_eq.size)
+        b_draws = b_hat + b_se * rng.standard_t(n_batches - 1, a_eq.size) + midpoint
         if truth_step is not None:
             # Unknown within its bound: uniform over it, on top of the statistical part.
             bound = truth_rounding_bound(float(np.hypot(coef[1], coef[2])), truth_step)
@@ -844,17 +859,20 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
                   "harmonics": list(harmonics), "effects": list(effects),
                   "extra_scale": list(setup["extra_scale"]), "sigma_prior": sigma_prior},
         b_samples=b_draws, stroke_samples=stroke,
+        midpoint_samples=None if stroke is None else midpoint,
     )
 
 
 def _stroke_samples(samples, names, harmonics):
-    """Peak-to-peak stroke per SI sample row of a model with harmonics, else None."""
+    """``(stroke, midpoint)`` per SI sample row: the peak-to-peak stroke of a model with
+    harmonics (None without) and the midpoint of its turning points about the motion's mean
+    (0 without: a sine's turning points are symmetric about its mean)."""
     if not harmonics:
-        return None
+        return None, np.zeros(samples.shape[0])
     names = list(names)
     c = samples[:, [names.index(f"c{k}") for k in harmonics]]
     s = samples[:, [names.index(f"s{k}") for k in harmonics]]
-    return model.stroke_and_midpoint(samples[:, 0], harmonics, c, s)[0]
+    return model.stroke_and_midpoint(samples[:, 0], harmonics, c, s)
 
 
 def _report_stroke(summary, stroke):
@@ -911,6 +929,9 @@ def pool_fits(fits) -> FitResult:
     a_eq = np.concatenate([f.a_eq_samples[i] for f, i in zip(fits, picks)])
     summary = {name: _quantiles(samples[:, j]) for j, name in enumerate(names)}
     summary["a_eq"] = _quantiles(a_eq)
+    midpoint = np.concatenate([np.zeros(i.size) if f.midpoint_samples is None
+                               else f.midpoint_samples[i] for f, i in zip(fits, picks)])
+    summary["E_b"] = _quantiles(samples[:, 1] + midpoint)
     stroke = None
     if any(f.stroke_samples is not None for f in fits):
         stroke = np.concatenate([f.stroke[i] for f, i in zip(fits, picks)])
@@ -934,7 +955,8 @@ def pool_fits(fits) -> FitResult:
         wall_time_s=float(sum(f.wall_time_s for f in fits)),
         settings={k: v for k, v in first.settings.items()
                   if k not in ("harmonics", "effects", "extra_scale", "bounds_internal")}
-        | {"pooled": labels}, b_samples=b, stroke_samples=stroke)
+        | {"pooled": labels}, b_samples=b, stroke_samples=stroke,
+        midpoint_samples=None if stroke is None else midpoint)
 
 
 def map_fit(t, counts, step, f_hz=None, harmonics=(), effects=(), start=None,
@@ -1028,6 +1050,23 @@ def map_fit(t, counts, step, f_hz=None, harmonics=(), effects=(), start=None,
                                     "xatol": 1e-7, "fatol": 1e-2})
             x = res.x
         return res
+
+    def gradient_descend(x):
+        """L-BFGS-B on the smoothed likelihood (jitter held), then on the full one."""
+        lo, hi = bounds[:, 0] + margin, bounds[:, 1] - margin
+        x = np.clip(x, lo, hi)
+        res = minimize(smoothed, x[free], method="L-BFGS-B",
+                       bounds=list(zip(lo[free], hi[free])),
+                       options={"maxfun": int(4 * max_evals)})
+        x = np.insert(res.x, 4, x[4])
+        return minimize(objective, x, method="L-BFGS-B", bounds=list(zip(lo, hi)),
+                        options={"maxfun": int(4 * max_evals)})
+
+    if lrde_motion.from_harmonics(setup["harmonics"]).gradient_point_fit:
+        # Many shape columns (a Fourier series): a simplex in that many dimensions stops far
+        # from the optimum within its budget, a gradient method does not (the likelihood is
+        # smooth in the coefficients at a jitter of a few hundredths of a step).
+        descend = gradient_descend
 
     best = None
     for x in starts:

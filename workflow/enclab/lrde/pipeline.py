@@ -19,9 +19,10 @@ Settings keys (all optional): ``channel``, ``requantize``, ``use_truth``, ``rest
 the chains go on until they converge, up to this many steps), ``n_burn`` (100),
 ``ppc_draws`` (40), ``sigma_range_steps`` (prior range of the jitter in steps) and
 ``sigma_prior`` (``"uniform"`` or ``"log-uniform"``), see
-:func:`enclab.lrde.fit.fit_sinusoid`; ``motion_models`` (harmonic orders of the candidate
-motion models compared on held-out halves, default ``[[], [2], [3]]``; ``[]`` turns the
-comparison off) and ``effects`` (encoder and clock effects compared with them, default
+:func:`enclab.lrde.fit.fit_sinusoid`; ``motion_models`` (candidate motion models compared
+on held-out cycles, :func:`enclab.lrde.motion.motion_model`: lists of harmonic orders or
+``"fourier<K>"``, default :data:`DEFAULT_MOTION_MODELS`; ``[]`` turns the comparison off) and
+``effects`` (encoder and clock effects compared with them, default
 all of :data:`enclab.lrde.effects.EFFECTS`), ``effect_pairs`` (also try the winner plus each
 other passing term, default True), ``trust_z`` (threshold of the predictive check, default -4),
 ``local_z`` (threshold of the localized check, default -5),
@@ -48,10 +49,17 @@ import pandas as pd
 from enclab.core import parallel
 from enclab.lrde import compare, dwell, fit, plots, report
 from enclab.lrde import effects as lrde_effects
+from enclab.lrde import motion as lrde_motion
 
 __all__ = ["select_channels", "analyse_lrde_log"]
 
 _log = logging.getLogger(__name__)
+
+#: Candidate motion models of the held-out comparison when ``motion_models`` is not given:
+#: the sinusoid and a 2nd or a 3rd harmonic. The workflow's configuration adds Fourier series
+#: of free shape (``fourier4``, ``fourier6``, :mod:`enclab.lrde.motion`) for motions set by a
+#: control loop; each candidate costs the stage two point fits or more.
+DEFAULT_MOTION_MODELS = ([], [2], [3])
 
 _KNOWN_SETTINGS = {"channel", "requantize", "use_truth", "rest_position", "f_hz", "n_ensembles",
                    "n_walkers", "n_steps", "max_steps", "n_burn", "ppc_draws", "sigma_range_steps",
@@ -78,7 +86,8 @@ def _sampler_settings(settings: dict) -> dict:
 
 def _compare_effects(t, counts, step, seed, settings, threads=1) -> tuple:
     """The effect comparison's block and the comparison itself (None when not run)."""
-    harmonics = [tuple(c) for c in settings.get("motion_models", [[], [2], [3]])]
+    harmonics = [lrde_motion.motion_model(c).harmonics
+                 for c in settings.get("motion_models", DEFAULT_MOTION_MODELS)]
     names = lrde_effects.check_effects(settings.get("effects", lrde_effects.EFFECTS))
     candidates = [((), ())] + [(h, ()) for h in harmonics if h] + [((), (e,)) for e in names]
     if len(candidates) < 2:
@@ -362,7 +371,9 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
             block["centre_count"])
     figures = {"corner": plots.corner_plot(result),
                "dwell_ppc": plots.dwell_ppc_plot(cycles, predictive),
-               "bias_cycles": plots.bias_cycles_plot(cycles, step, truth_periods),
+               "bias_cycles": plots.bias_cycles_plot(
+                   cycles, step, truth_periods,
+                   fitted={"E_b": block["E_b"], "label": model_block.get("chosen", "sinusoid")}),
                "misfit": plots.misfit_plot(None if comparison is None
                                            else comparison["trace_detail"])}
     report_md = report.report_markdown(block, meta.get("log_id"))

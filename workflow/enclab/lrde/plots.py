@@ -171,8 +171,8 @@ def truth_bias_deviation(t, truth, f_hz, step, offset_a, centre_count) -> pd.Dat
     return per_period
 
 
-def bias_cycles_plot(cycles: pd.DataFrame, step: float, truth_periods: pd.DataFrame | None = None
-                     ) -> Figure:
+def bias_cycles_plot(cycles: pd.DataFrame, step: float, truth_periods: pd.DataFrame | None = None,
+                     fitted: dict | None = None) -> Figure:
     """Paper 002 Fig. 6 from a log: per-cycle bias deviation in Proposition 1's band.
 
     Top: ``E_b`` of every symmetric cycle from its dwell half-widths (eq. 4/14; readings only)
@@ -188,6 +188,10 @@ def bias_cycles_plot(cycles: pd.DataFrame, step: float, truth_periods: pd.DataFr
         Encoder step (rad).
     truth_periods : pandas.DataFrame, optional
         Columns ``t_mid`` and ``E_b`` (rad).
+    fitted : dict, optional
+        The fitted motion's ``E_b`` (``{median, q05, q95}``, rad, about the mean of its
+        turning points) and its model ``label``: drawn as its median and 90 % band over the
+        log (a periodic model has one bias for the whole log).
     """
     missing = {"t_start", "t_end", "symmetric", "A12_dwell", "E_b_dwell", "steps_pp"} - set(cycles)
     if missing:
@@ -206,6 +210,13 @@ def bias_cycles_plot(cycles: pd.DataFrame, step: float, truth_periods: pd.DataFr
     else:
         ax_b.text(0.5, 0.5, "no symmetric 2n-step cycle: eq. (4) does not apply",
                   transform=ax_b.transAxes, ha="center", va="center")
+    if fitted is not None:
+        span = (float(cycles["t_start"].min()), float(cycles["t_end"].max()))
+        e_b = fitted["E_b"]
+        ax_b.fill_between(span, _DEG * e_b["q05"], _DEG * e_b["q95"], color="C2", alpha=0.3,
+                          lw=0)
+        ax_b.plot(span, [_DEG * e_b["median"]] * 2, "-", color="C2", lw=1.2,
+                  label=rf"$E_b$ of the fitted motion ({fitted['label']}, 90 %)")
     if truth_periods is not None:
         ax_b.plot(truth_periods["t_mid"], _DEG * truth_periods["E_b"], "-", lw=1.0,
                   color="C3", label=r"$E_b$ of the true angle (truth channel)")

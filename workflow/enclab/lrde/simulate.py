@@ -148,7 +148,7 @@ def closed_loop_pid_log(rng, step=ROS_DRILL_STEP, amplitude=float(np.deg2rad(0.1
                         f_hz=20.0, fs_hz=2000.0, n_cycles=60, offset_frac=None, kp=800.0,
                         ki=3000.0, kd=0.0, tau=0.002, gain=1.0,
                         disturbance=float(np.deg2rad(2.0)),
-                        noise_std=0.0, truth_step=None):
+                        noise_std=0.0, truth_step=None, dead_band=0.0, missed_count=None):
     """PID servo tracking ``amplitude sin(2 pi f t)`` with the coarse encoder in the loop.
 
     The loop of paper 002 Fig. 5: reference ``theta_d``, error ``e = theta_d - reading`` with
@@ -195,6 +195,14 @@ def closed_loop_pid_log(rng, step=ROS_DRILL_STEP, amplitude=float(np.deg2rad(0.1
         Standard deviation (rad) of white position noise seen by the encoder only.
     truth_step : float or None
         Fine rounding encoder step for a ``truth_counts`` column.
+    dead_band : float
+        Width ``w`` (rad) of a dead band of the coarse encoder (the reading switches up
+        ``w/2`` late and down ``w/2`` early, :func:`enclab.lrde.effects.simulate_counts`);
+        the controller acts on that reading.
+    missed_count : (int, int) or None
+        ``(index, delta)``: the counter reads ``delta`` counts off from sample ``index`` on
+        (a missed or extra count); the controller acts on that reading, so the motion's bias
+        moves by ``-delta`` steps and the readings stay where they were.
 
     Returns
     -------
@@ -203,7 +211,7 @@ def closed_loop_pid_log(rng, step=ROS_DRILL_STEP, amplitude=float(np.deg2rad(0.1
         simulated true angle) and optionally ``truth_counts``.
     params : dict
         ``step, offset_a, ideal_bias, f_hz, fs_hz, amplitude, kp, ki, kd, tau, gain,
-        disturbance, noise_std, truth_step, n_cycles``.
+        disturbance, noise_std, truth_step, n_cycles, dead_band, missed_count``.
     """
     rng = _check_rng(rng)
     step = _check_positive("step", step)
@@ -228,12 +236,25 @@ def closed_loop_pid_log(rng, step=ROS_DRILL_STEP, amplitude=float(np.deg2rad(0.1
     state = np.zeros(2)
     theta = np.empty(t.size)
     counts = np.empty(t.size, dtype=np.int64)
+    if not (np.isscalar(dead_band) and np.isfinite(dead_band) and 0 <= dead_band < step):
+        raise ValueError(f"dead_band must lie in [0, step), got {dead_band!r}")
+    jump_at, jump_by = (t.size, 0) if missed_count is None else (int(missed_count[0]),
+                                                                  int(missed_count[1]))
+    half_w = 0.5 * dead_band / step
     integral = 0.0
     previous_error = 0.0
+    state_count = None
     # The loop is inherently sequential (each command depends on the last reading).
     for j in range(t.size):
         theta[j] = state[0]
-        counts[j] = np.floor((state[0] + noise[j] + a) / step)
+        x = (state[0] + noise[j] + a) / step
+        if state_count is None or half_w == 0.0:
+            state_count = int(np.floor(x))
+        elif x >= state_count + 1.0 + half_w:
+            state_count = int(np.floor(x - half_w))
+        elif x < state_count - half_w:
+            state_count = int(np.floor(x + half_w))
+        counts[j] = state_count + (jump_by if j >= jump_at else 0)
         error = reference[j] - step * counts[j]
         integral += error * dt
         derivative = (error - previous_error) / dt if j > 0 else 0.0
@@ -248,5 +269,6 @@ def closed_loop_pid_log(rng, step=ROS_DRILL_STEP, amplitude=float(np.deg2rad(0.1
               "f_hz": f_hz, "fs_hz": fs_hz, "amplitude": amplitude, "kp": float(kp),
               "ki": float(ki), "kd": float(kd), "tau": tau, "gain": gain,
               "disturbance": float(disturbance), "noise_std": float(noise_std),
-              "truth_step": truth_step, "n_cycles": n_cycles}
+              "truth_step": truth_step, "n_cycles": n_cycles, "dead_band": float(dead_band),
+              "missed_count": None if missed_count is None else (jump_at, jump_by)}
     return df, params

@@ -1,0 +1,223 @@
+"""Benchmark of the LRDE stage on closed-loop logs (paper 002's own setting).
+
+Each draw is a PID servo tracking a 20 Hz sinusoid with the Ros-Drill encoder (0.09 deg) in
+the loop (:func:`enclab.lrde.simulate.closed_loop_pid_log`, paper 002 Fig. 5), over a grid of
+
+==========  ====================================================================
+axis        values
+==========  ====================================================================
+gains       ``nominal`` (kp 800, ki 3000) and ``soft`` (kp 400, ki 1500), kd 0
+effect      ``none``, ``dead_band`` (width U(0.05, 0.2) step, in the loop), ``missed_count``
+            (one count lost at U(0.25, 0.75) of the log, in the loop)
+==========  ====================================================================
+
+and, drawn per log, the encoder offset ``a ~ U(0, step)``, the reference amplitude
+``U(1, 3)`` steps (2 to 6 steps peak to peak) and the position noise (0 or 0.02 step, seen by
+the encoder only). The loop's pull-in (the first 30 cycles) is left out of the log, and a fine
+rounding channel of step/100 reads the motion.
+
+The fine channel's values are those of the docs' definitions for a motion that is not a
+sinusoid: ``A12`` the mean over the log's cycles (of the reference) of ``max - min`` of the
+true angle (and, recorded beside it, ``max - min`` of the cycle-averaged true angle, the
+stroke of the periodic part a periodic model describes), the bias ``b`` the mean of
+``(max + min) / 2``, and ``E_b = a + b - (m + 1/2) step`` in the frame of the fit's centre
+count ``m`` (with a missed count the counter's offset after it, so that both segments share
+the readings' frame). Per draw the stage runs as
+``make run`` runs it (:func:`enclab.lrde.pipeline.analyse_lrde_log`, the ``lrde`` settings of
+``config.yaml``, 2 processes) and records the chosen model, whether its 90 % intervals of
+``A12`` and ``E_b`` hold the fine channel's values, whether the stage flags them untrusted,
+and its wall time beside a 5M-iteration Python loop timed just before it (the machine's
+speed at that moment). A log "the model describes" is one without an encoder effect whose motion
+repeats from cycle to cycle (standard deviations of the per-cycle stroke and bias below 0.05
+step): there an untrusted flag is false.
+
+Usage (shards run side by side or one after another)::
+
+    python workflow/benchmarks/lrde_closed_loop.py --draws 4 --cycles 20 --shard 0/2
+
+Writes ``<out>/lrde_closed_loop_draws.csv`` and ``<out>/lrde_closed_loop.csv`` (per cell).
+"""
+from __future__ import annotations
+
+import argparse
+import pathlib
+import sys
+import time
+
+import numpy as np
+import pandas as pd
+import yaml
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from provenance import ROOT, stamp  # noqa: E402
+
+from enclab.lrde import pipeline, simulate  # noqa: E402
+
+STEP = simulate.ROS_DRILL_STEP
+FINE = STEP / 100
+F_HZ, FS_HZ = 20.0, 2000.0
+PULL_IN = 30
+GAINS = {"nominal": (800.0, 3000.0), "soft": (400.0, 1500.0)}
+EFFECTS = ("none", "dead_band", "missed_count")
+PERIODIC_SD = 0.05  # step: per-cycle stroke and bias standard deviations of a repeating motion
+
+
+def simulate_log(rng, gains, effect, n_cycles):
+    """``(df, meta, truth)`` of one draw (truth: fine-channel values and what was drawn)."""
+    kp, ki = GAINS[gains]
+    amplitude = rng.uniform(1.0, 3.0) * STEP
+    noise = float(rng.choice([0.0, 0.02])) * STEP
+    offset_frac = rng.uniform(0.0, 1.0)
+    n_total = PULL_IN + n_cycles
+    n_samples = int(round(n_total * FS_HZ / F_HZ))
+    kw = {}
+    if effect == "dead_band":
+        kw["dead_band"] = rng.uniform(0.05, 0.2) * STEP
+    elif effect == "missed_count":
+        first = int(round(PULL_IN * FS_HZ / F_HZ))
+        kw["missed_count"] = (first + int(rng.uniform(0.25, 0.75) * (n_samples - first)), -1)
+    df, p = simulate.closed_loop_pid_log(rng, amplitude=amplitude, f_hz=F_HZ, fs_hz=FS_HZ,
+                                         n_cycles=n_total, offset_frac=offset_frac, kp=kp,
+                                         ki=ki, noise_std=noise, truth_step=FINE, **kw)
+    keep = df["t"].to_numpy() >= PULL_IN / F_HZ
+    t = df["t"].to_numpy()[keep]
+    theta = df["truth_counts"].to_numpy()[keep] * FINE
+    a_eff = np.full(t.size, p["offset_a"])
+    if p["missed_count"] is not None:
+        index, delta = p["missed_count"]
+        a_eff[np.flatnonzero(keep) >= index] += delta * STEP
+    cycle = np.floor(t * F_HZ + 1e-9).astype(np.int64)
+    whole = [c for c in np.unique(cycle) if np.count_nonzero(cycle == c) >= FS_HZ / F_HZ - 1]
+    top = np.array([theta[cycle == c].max() for c in whole])
+    bottom = np.array([theta[cycle == c].min() for c in whole])
+    a_cyc = np.array([a_eff[cycle == c].mean() for c in whole])
+    stroke, mid = top - bottom, 0.5 * (top + bottom)
+    # The cycle-averaged motion (what a periodic model describes): the mean over cycles at
+    # each phase (a whole number of samples per cycle).
+    per = int(round(FS_HZ / F_HZ))
+    first = int(np.flatnonzero(cycle == whole[0])[0])
+    shape = theta[first:first + len(whole) * per].reshape(len(whole), per).mean(axis=0)
+    out = pd.DataFrame({"t": t - t[0], "coarse": df["counts"].to_numpy()[keep],
+                        "fine": df["truth_counts"].to_numpy()[keep]})
+    meta = {"log_id": "closed_loop_draw", "channels": [
+        {"name": "coarse", "role": "measured", "joint": 1, "unit": "counts",
+         "storage": "counts", "step": STEP},
+        {"name": "fine", "role": "truth", "joint": 1, "unit": "counts", "storage": "counts",
+         "step": FINE}]}
+    truth = {"A12_true": float(stroke.mean()), "A12_avg_true": float(np.ptp(shape)),
+             "a_plus_b": float(np.mean(a_cyc + mid)),
+             "stroke_sd_steps": float(stroke.std() / STEP), "bias_sd_steps": float(
+                 mid.std() / STEP), "amplitude_steps": amplitude / STEP,
+             "noise_steps": noise / STEP, "offset_frac": offset_frac,
+             "dead_band_steps": kw.get("dead_band", 0.0) / STEP}
+    return out, meta, truth
+
+
+def one_draw(gains, effect, n_cycles, seed, settings, threads):
+    rng = np.random.default_rng(seed)
+    df, meta, truth = simulate_log(rng, gains, effect, n_cycles)
+    # The machine's speed beside the stage: a 5M-iteration Python loop, timed just before.
+    ref = time.perf_counter()
+    [0 for _ in range(5_000_000)]
+    ref_s = time.perf_counter() - ref
+    started = time.perf_counter()
+    block, _, _, _ = pipeline.analyse_lrde_log(df, meta, seed, dict(settings), threads=threads)
+    wall = time.perf_counter() - started
+    centre = block["centre_count"]
+    row = {"gains": gains, "effect": effect, "cycles": n_cycles, "seed": seed, **truth,
+           "E_b_true": truth["a_plus_b"] - (centre + 0.5) * STEP,
+           "chosen": block["model"]["chosen"],
+           "trusted": all(v["trusted"] for v in block["trust"].values()),
+           "converged": block["diagnostics"]["converged"], "wall_s": wall,
+           "reference_loop_s": ref_s,
+           "described": (effect == "none" and truth["stroke_sd_steps"] < PERIODIC_SD
+                         and truth["bias_sd_steps"] < PERIODIC_SD)}
+    for name in ("A12", "E_b"):
+        lo, hi = block[name]["q05"], block[name]["q95"]
+        true = row[f"{name}_true"]
+        row[f"{name}_median"], row[f"{name}_q05"], row[f"{name}_q95"] = (
+            block[name]["median"], lo, hi)
+        row[f"{name}_cover"] = bool(lo <= true <= hi)
+        row[f"{name}_confident_miss"] = bool(row["converged"] and row["trusted"]
+                                             and max(lo - true, true - hi, 0.0) > hi - lo)
+    lo, hi = block["A12"]["q05"], block["A12"]["q95"]
+    row["A12_avg_cover"] = bool(lo <= row["A12_avg_true"] <= hi)
+    return row
+
+
+def summarise(draws: pd.DataFrame) -> pd.DataFrame:
+    rows = []
+    for (cycles, gains, effect), g in draws.groupby(["cycles", "gains", "effect"]):
+        described = g[g["described"]]
+        rows.append({"cycles": cycles, "gains": gains, "effect": effect, "n": len(g),
+                     "A12_cover": g["A12_cover"].mean(), "E_b_cover": g["E_b_cover"].mean(),
+                     "A12_avg_cover": g["A12_avg_cover"].mean(),
+                     "A12_bias_steps": ((g["A12_median"] - g["A12_true"]) / STEP).mean(),
+                     "untrusted": 1.0 - g["trusted"].mean(),
+                     "n_described": len(described),
+                     "untrusted_described": (1.0 - described["trusted"].mean()
+                                             if len(described) else np.nan),
+                     "confident_miss": (g["A12_confident_miss"] | g["E_b_confident_miss"]).mean(),
+                     "chosen": "|".join(f"{k}:{v}" for k, v in
+                                        g["chosen"].value_counts().items()),
+                     "wall_s_median": g["wall_s"].median(), "wall_s_max": g["wall_s"].max(),
+                     "wall_over_reference_median": (
+                         (g["wall_s"] / g["reference_loop_s"]).median()
+                         if "reference_loop_s" in g else np.nan)})
+    return pd.DataFrame(rows)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--gains", nargs="+", default=list(GAINS), choices=list(GAINS))
+    ap.add_argument("--effects", nargs="+", default=list(EFFECTS), choices=EFFECTS)
+    ap.add_argument("--cycles", type=int, nargs="+", default=[20])
+    ap.add_argument("--draws", type=int, default=100, help="draws per cell (index to stop at)")
+    ap.add_argument("--first-draw", type=int, default=0)
+    ap.add_argument("--seed", type=int, default=20261204)
+    ap.add_argument("--shard", default="0/1", metavar="K/N",
+                    help="run the draws whose running index is K modulo N")
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--out", default=str(ROOT / "results" / "benchmarks"))
+    ap.add_argument("--from-draws", nargs="+", default=None, metavar="CSV",
+                    help="summarise these draws instead of running any")
+    args = ap.parse_args(argv)
+    out = pathlib.Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    if args.from_draws:
+        draws = pd.concat([pd.read_csv(p) for p in args.from_draws], ignore_index=True)
+        draws = draws.drop_duplicates(["cycles", "gains", "effect", "seed"], keep="last")
+    else:
+        k, n = (int(x) for x in args.shard.split("/"))
+        if not 0 <= k < n:
+            ap.error(f"--shard {args.shard}: K must be in 0..N-1")
+        settings = dict(yaml.safe_load((ROOT / "config.yaml").read_text())["lrde"])
+        settings.pop("seed")
+        jobs = [(g, e, c, args.seed + 100_000 * EFFECTS.index(e) + 10_000 * list(GAINS).index(g)
+                 + 1000 * c + i)
+                for i in range(args.first_draw, args.draws) for c in args.cycles for g in args.gains
+                for e in args.effects]
+        rows = []
+        path = out / (f"lrde_closed_loop_draws_{k}of{n}.csv" if n > 1
+                      else "lrde_closed_loop_draws.csv")
+        for j, job in enumerate(jobs):
+            if j % n != k:
+                continue
+            rows.append(one_draw(*job, settings, args.threads))
+            r = rows[-1]
+            print(f"{r['gains']} {r['effect']} {r['cycles']} cyc seed {r['seed']}: "
+                  f"{r['chosen']} trusted={r['trusted']} A12 cover={r['A12_cover']} "
+                  f"E_b cover={r['E_b_cover']} {r['wall_s']:.0f} s", flush=True)
+            stamp(pd.DataFrame(rows)).to_csv(path, index=False)
+        draws = stamp(pd.DataFrame(rows))
+        draws.to_csv(path, index=False)
+        if n > 1:
+            return 0
+    draws.to_csv(out / "lrde_closed_loop_draws.csv", index=False)
+    stamp(summarise(draws)).to_csv(out / "lrde_closed_loop.csv", index=False)
+    print(summarise(draws).to_string())
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
