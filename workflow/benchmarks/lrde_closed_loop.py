@@ -178,6 +178,9 @@ def main(argv=None):
     ap.add_argument("--shard", default="0/1", metavar="K/N",
                     help="run the draws whose running index is K modulo N")
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--motion-models", nargs="+", default=["[]", "[2]", "[3]", "fourier4", "fourier6"],
+                    help="lrde.motion_models for these logs (YAML items; the measured rows used "
+                         "the default, config.yaml's candidates plus the Fourier series)")
     ap.add_argument("--out", default=str(ROOT / "results" / "benchmarks"))
     ap.add_argument("--from-draws", nargs="+", default=None, metavar="CSV",
                     help="summarise these draws instead of running any")
@@ -193,6 +196,7 @@ def main(argv=None):
             ap.error(f"--shard {args.shard}: K must be in 0..N-1")
         settings = dict(yaml.safe_load((ROOT / "config.yaml").read_text())["lrde"])
         settings.pop("seed")
+        settings["motion_models"] = [yaml.safe_load(m) for m in args.motion_models]
         jobs = [(g, e, c, args.seed + 100_000 * EFFECTS.index(e) + 10_000 * list(GAINS).index(g)
                  + 1000 * c + i)
                 for i in range(args.first_draw, args.draws) for c in args.cycles for g in args.gains
