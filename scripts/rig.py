@@ -22,7 +22,8 @@ def main(smk):
     # The compliance's form (declared, or the play take-up), the reversal transient and a torque
     # map's number of intervals are chosen per fold on its training runs, like the knot spacing.
     out = report_rig(smk.wildcards.rig, p.pair["measured"], runs, spec, list(p.splits), s["spacings"],
-                     p.truth_counts_per_rev, variants="takeup", torque_knots=knots)
+                     p.truth_counts_per_rev, variants="takeup", torque_knots=knots,
+                     extrapolation_ratio=s["extrapolation_ratio"])
     atomic.write_json(out["block"], smk.output.block)
     for key in ("heldout", "splits", "conditions"):
         atomic.write_table(out["tables"][key], smk.output[key])

@@ -593,3 +593,58 @@ def test_fold_spread_counts_the_folds_that_keep_a_term(sim_rig):
     assert spread["torque_back:linear"]["kept_in"] == 2
     assert "torque_front:linear" in rig.loose_parameters(spread, 0.15)
     assert rig.loose_parameters(spread, np.inf) == ["torque_front:linear"]
+
+
+# ----------------------------------------------------------------------------- extrapolation
+
+
+def test_term_groups_gather_a_torques_terms_and_maps():
+    names = ["scale", "latency", "map0", "map1", "torque_back:linear", "torque_back:signed_square",
+             "tmap_torque_back0", "tmap_torque_back1", "torque_front:linear", "transient0", "input_cos1",
+             "input_sin1"]
+    groups = rig.term_groups(names)
+    assert groups == {"scale": [0], "latency": [1], "map": [2, 3], "torque_back compliance": [4, 5, 6, 7],
+                      "torque_front compliance": [8], "transient": [9], "input": [10, 11]}
+
+
+def test_refit_shared_of_every_term_on_the_training_runs_is_the_fit(sim_rig, sim_fit):
+    # Refitting every shared term on the runs it was fitted on, at the same play widths, solves
+    # the same normal equations: the coefficients agree to the Gauss-Newton tolerance on the
+    # widths (1e-7 rad, moving the coefficients by far less than their jackknife sd).
+    again = rig.refit_shared(sim_fit, sim_rig[:7])
+    sd = np.sqrt(np.diag(sim_fit.cov))
+    assert np.all(np.abs(again.coef - sim_fit.coef) < 0.05 * sd)
+
+
+def test_coverage_lists_conditions_and_ranges(sim_rig):
+    cov = rig.coverage(sim_rig[:3], t_skip=1.5)
+    assert cov["conditions"] == {"frequency_hz": [0.5], "load": [0.0, 0.3, 0.6]}
+    lo, hi = cov["torques"]["torque_back"]
+    assert lo < 0 < hi
+    after = np.concatenate([r.measured[r.t >= 1.5] for r in sim_rig[:3]])
+    assert cov["angle"] == [after.min(), after.max()]
+
+
+def test_a_split_that_does_not_extrapolate_is_flagged_and_its_term_blamed(takeup_rig):
+    # The twist takes the play up as tanh(T / 0.01 N m); a softening polynomial T + T|T| fitted on
+    # the two low loads bends the wrong way at the high one (the load split), while the frequency
+    # split sees every load in training. The load split must be flagged, the back torque's
+    # compliance blamed; the frequency split must not be flagged.
+    spec = rig.RigSpec(spacing=None, compliance=SPEC_COMP)
+    splits = [{"name": "frequency", "by": "frequency_hz", "train": [0.5, 1.0], "test": [0.75]},
+              {"name": "load", "by": "load", "train": [0.0, 0.3], "test": [0.6]}]
+    folds = rig.make_folds(takeup_rig, splits)
+    rows, out = rig.evaluate(takeup_rig, spec, folds)
+    ext = {e["split"]: e for e in rig.extrapolation(takeup_rig, rows, out, ratio=2.0)}
+    assert ext["frequency"]["extrapolates"]
+    assert not ext["load"]["extrapolates"] and "training runs' own" in ext["load"]["reason"]
+    assert ext["load"]["blame"] == "torque_back compliance"
+    assert ext["load"]["excess_share"]["torque_back compliance"] > 0.5
+    assert ext["load"]["coverage"]["train"]["conditions"]["load"] == [0.0, 0.3]
+    assert ext["load"]["coverage"]["test"]["conditions"]["load"] == [0.6]
+    # the play take-up, chosen on the training runs, extrapolates (bounded)
+    rows, out = rig.evaluate(takeup_rig, spec, folds, variants="takeup")
+    ext = {e["split"]: e for e in rig.extrapolation(takeup_rig, rows, out, ratio=2.0)}
+    assert ext["load"]["extrapolates"]
+    with pytest.raises(ValueError, match="ratio"):
+        rig.extrapolation(takeup_rig, rows, out, ratio=1.0)

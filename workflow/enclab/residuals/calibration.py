@@ -139,8 +139,17 @@ class MapBasis:
 
     def design(self, a) -> np.ndarray:
         """Columns of the map at angles ``a``: shape ``(len(a), n_columns)``."""
-        coef, rot = self._projection
         a = np.asarray(a, dtype=np.float64)
+        if a.ndim == 1 and a.size > 64:
+            # A quantized angle or torque takes few distinct values: evaluate on those (the
+            # same rows, gathered), not once per sample.
+            u, inv = np.unique(a, return_inverse=True)
+            if 2 * u.size < a.size:
+                return self._design(u)[inv]
+        return self._design(a)
+
+    def _design(self, a) -> np.ndarray:
+        coef, rot = self._projection
         ac = np.clip(a, self.lo, self.hi)
         raw = self._raw(ac)
         if self.extrapolate == "linear":
