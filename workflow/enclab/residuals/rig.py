@@ -1089,15 +1089,11 @@ def coverage(runs: Sequence[Run], t_skip: float = 0.0, q: float = 0.005) -> dict
     return out
 
 
-def _steady_ss(fit: RigFit, runs: Sequence[Run], widths: Mapping | None = None) -> tuple[float, int]:
-    """Sum of squares and number of the steady-stroke residuals of ``runs`` under ``fit``
-    (``widths``: play widths to search around)."""
-    tot, cnt = 0.0, 0
-    for r in runs:
-        sc = score_run(r, predict_run(fit, r, (widths or {}).get(r.run_id))[0], fit.spec)
-        tot += sc["steady_ss"]
-        cnt += sc["n_steady"]
-    return tot, cnt
+def _sum_squares(fit: RigFit, runs: Sequence[Run], widths: Mapping | None = None) -> float:
+    """Sum of squares of the residuals of ``runs`` under ``fit`` on every sample after
+    ``t_skip`` (``widths``: play widths to search around)."""
+    return float(sum(score_run(r, predict_run(fit, r, (widths or {}).get(r.run_id))[0], fit.spec)["all_ss"]
+                     for r in runs))
 
 
 def extrapolation(runs: Sequence[Run], rows: Sequence[Mapping], folds_out: Sequence[Mapping],
@@ -1116,12 +1112,13 @@ def extrapolation(runs: Sequence[Run], rows: Sequence[Mapping], folds_out: Seque
     refitted on the test runs with the others held at their training values
     (:func:`refit_shared`); ``excess_share`` is the fraction of the held-out excess (held-out
     sum of squares minus that with every shared term refitted on the test runs) that refitting
-    the group alone removes, on steady strokes. The term with the largest share is ``blame``.
+    the group alone removes, on every sample after ``t_skip`` (what the refit minimises). The
+    term with the largest share is ``blame``.
 
     Returns one dict per split: ``split``, ``by``, ``heldout`` and ``inner`` (``{steady,
     all}`` std, rad), ``others`` (the smallest of the other splits'), ``ratio_to_others``,
     ``ratio_to_inner``, ``extrapolates`` (bool), ``reason``, ``excess_share``, ``blame``,
-    ``refit_all`` (test runs' std with every shared term refitted on them) and the training and
+    ``refit_all`` (test runs' std, all samples, with every shared term refitted on them) and the training and
     test runs' ``coverage`` (:func:`coverage`).
     """
     if not ratio > 1:
@@ -1152,14 +1149,15 @@ def extrapolation(runs: Sequence[Run], rows: Sequence[Mapping], folds_out: Seque
                     inner_ss[on] += float(ss.sum())
                     inner_n[on] += float(n.sum())
             # Steady sums of squares of the test runs: as held out, every term refitted, each alone.
-            # as held out: the fold's own rows (their play widths: a start for the refits)
+            # As held out: the fold's own rows (their play widths: a start for the refits). The
+            # refits minimise the sum of squares on every sample: the shares are taken there.
             mine = [r for r in rows if r["split"] == s and r["fold"] == f["fold"] and r["role"] == "test"]
-            base_ss += sum(r["steady_ss"] for r in mine)
-            n_test += sum(r["n_steady"] for r in mine)
+            base_ss += sum(r["all_ss"] for r in mine)
+            n_test += sum(r["n_all"] for r in mine)
             w = {r["run_id"]: r["play_width"] for r in mine}
-            oracle_ss += _steady_ss(refit_shared(fit, test, widths=w), test, w)[0]
+            oracle_ss += _sum_squares(refit_shared(fit, test, widths=w), test, w)
             for term, idx in term_groups(fit.names).items():
-                refit_ss[term] = refit_ss.get(term, 0.0) + _steady_ss(refit_shared(fit, test, idx, w), test, w)[0]
+                refit_ss[term] = refit_ss.get(term, 0.0) + _sum_squares(refit_shared(fit, test, idx, w), test, w)
         inner = {k: float(np.sqrt(inner_ss[k] / inner_n[k])) if inner_n[k] else float("nan") for k in inner_ss}
         others = {k: min((held[o][f"{k}_std"] for o in splits if o != s), default=float("nan"))
                   for k in ("steady", "all")}
@@ -1177,7 +1175,7 @@ def extrapolation(runs: Sequence[Run], rows: Sequence[Mapping], folds_out: Seque
                     "ratio_to_others": to_others, "ratio_to_inner": to_inner, "ratio": ratio,
                     "extrapolates": not reasons, "reason": "; ".join(reasons),
                     "excess_share": shares, "blame": blame,
-                    "refit_all_steady": float(np.sqrt(oracle_ss / n_test)) if n_test else float("nan"),
+                    "refit_all": float(np.sqrt(oracle_ss / n_test)) if n_test else float("nan"),
                     "coverage": {"train": coverage(train_runs, folds[0]["fit"].spec.t_skip),
                                  "test": coverage(test_runs, folds[0]["fit"].spec.t_skip)}})
     return out

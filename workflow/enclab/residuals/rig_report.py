@@ -18,7 +18,7 @@ from enclab.residuals.calibration import compliance_curve, compliance_names
 
 __all__ = ["analyse_rig", "remains", "map_figure", "compliance_figure", "heldout_figure",
            "remains_figure", "markdown", "condition_table", "split_table", "extrapolation_lines",
-           "coverage_text", "EXTRAPOLATION_RATIO"]
+           "coverage_text", "EXTRAPOLATION_RATIO", "rule_spec"]
 
 MRAD = 1e3
 #: Largest relative change of a shared parameter between folds for it to count as pinned down.
@@ -427,7 +427,7 @@ def extrapolation_lines(result: Mapping) -> list[str]:
                   f"{ratio:g}x the smallest of the other splits' or {ratio:g}x its training runs' own held-out "
                   "std (one value of the split's condition held out at a time) (`rig.extrapolation_ratio`). "
                   "Blame: each shared term refitted on the test runs alone, the others at their training "
-                  "values; its share of the held-out excess on steady strokes (held-out sum of squares minus "
+                  "values; its share of the held-out excess (held-out sum of squares on every sample minus "
                   "that with every shared term refitted on the test runs).", ""]
         table = []
         for e in ext:
@@ -457,8 +457,8 @@ def extrapolation_lines(result: Mapping) -> list[str]:
                     f"({coverage_text(cov['train'])}) to its test runs ({coverage_text(cov['test'])}): "
                     f"{e['reason']}."
                     + (f" The term to blame is {blame}: refitted on the test runs alone it removes {share:.0%} "
-                       f"of the held-out excess (every shared term refitted: steady std "
-                       f"{e['refit_all_steady'] * MRAD:.3g} mrad); its training value does not carry over to "
+                       f"of the held-out excess (every shared term refitted: std "
+                       f"{e['refit_all'] * MRAD:.3g} mrad on all samples); its training value does not carry over to "
                        f"{e['by']} outside the training runs' values." if blame else ""))
         lines.append("")
     cov = result.get("coverage")
@@ -489,6 +489,20 @@ def _fit_block(fit: rg.RigFit) -> dict:
                               "band_hi": hi.tolist(), "gear_ratio": fit.spec.gear_ratio,
                               "harmonics": fit.spec.input_harmonics}
     return block
+
+
+def rule_spec(settings: Mapping, compliance: Mapping) -> tuple[rg.RigSpec, list]:
+    """The rig rule's model from the ``rig`` settings of ``config.yaml`` and a manifest's declared
+    ``compliance``: ``(spec, candidate numbers of torque-map intervals)``. The spec starts at the
+    largest knot spacing; the compliance's form, the reversal transient, a torque map's intervals
+    and the spacing are then chosen per fold on its training runs (:func:`report_rig` with
+    ``variants="takeup"``)."""
+    knots = list(settings.get("torque_knots") or [8])
+    spec = rg.RigSpec(spacing=max(settings["spacings"]), max_play=settings["max_play"],
+                      travel=settings["travel"], t_skip=settings["t_skip"], transient=settings.get("transient"),
+                      latency=True if settings.get("latency") == "run" else "shared",
+                      **rg.declared_compliance(compliance, knots[0]))
+    return spec, knots
 
 
 def report_rig(name: str, channel: str, runs: Sequence[rg.Run], spec: rg.RigSpec,
