@@ -1048,15 +1048,18 @@ def term_groups(names: Sequence[str]) -> dict:
 def refit_shared(fit: RigFit, runs: Sequence[Run], index: Sequence[int] | None = None,
                  widths: Mapping | None = None) -> RigFit:
     """``fit`` with the shared coefficients ``index`` (default: all) refitted on ``runs`` and the
-    others held at their values; every run's own offset, latency and play width are projected
-    out as in :func:`fit_rig` (play widths those :func:`predict_run` gives under ``fit``).
+    others held at their values; every run's own offset and latency are projected out as in
+    :func:`fit_rig`, its play width held (``widths``, default those :func:`predict_run` gives
+    under ``fit``).
 
     On held-out runs this is the question "how much of their error would this term remove,
     had it been fitted on them": the term that removes most of the held-out excess is the one
     whose training value does not carry over to the held-out conditions."""
     if widths is None:
         widths = {r.run_id: predict_run(fit, r)[1]["play_width"] for r in runs}
-    _, eqs = _normal_equations(runs, fit.spec, fit.basis, fit.a_mid, widths, play_step=True)
+    # The play widths held (not linearised): the refits then minimise the very sum of squares
+    # they are scored on, so refitting more terms never scores worse at those widths.
+    _, eqs = _normal_equations(runs, fit.spec, fit.basis, fit.a_mid, widths)
     G = sum(e[0] for e in eqs)
     h = sum(e[1] for e in eqs)
     coef = fit.coef.copy()
