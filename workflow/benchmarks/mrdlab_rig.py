@@ -165,7 +165,7 @@ def rule_rows(names) -> list[dict]:
                          "blame_share": shares.get(e.get("blame")) if e.get("blame") else None,
                          "form": " | ".join(
                              "; ".join(f"{c}: {'+'.join(t)}" for c, t in f["compliance"].items())
-                             + "".join(f"; {c} map {v['intervals']}" for c, v in f["torque_map"].items())
+                             + "".join(f"; {c} map {v['intervals']} {v['form']}" for c, v in f["torque_map"].items())
                              + f"; transient {f['transient'] or 'none'}; spacing {f['spacing']}"
                              for f in out["block"]["folds"] if f["split"] == sp["split"]),
                          "cpu_s": cpu, "loop_5M_cpu_s": ref})
@@ -187,6 +187,7 @@ def _form(spec: rig.RigSpec) -> str:
     terms = "; ".join(f"{c}: {'+'.join(t)}" for c, t in spec.compliance.items())
     scales = ", ".join(f"{c} T0={v:.3g} N m" for c, v in spec.torque_scales.items())
     tmap = ", ".join(f"{c} torque map {v[2]} intervals on [{v[0]:.3g}, {v[1]:.3g}] N m"
+                     + (f" ({v[3]})" if len(v) > 3 else "")
                      for c, v in spec.torque_map.items())
     return (f"{terms}{'; ' + scales if scales else ''}{'; ' + tmap if tmap else ''}; "
             f"transient {spec.transient or 'none'}")

@@ -134,6 +134,11 @@ class RigSpec:
         Harmonics per input-side revolution of the input-side calibration map (0 = none): a
         repeatable error of the input encoder or the gear mesh, periodic in the input angle
         (a spline of the output angle cannot hold it once a stroke spans many input turns).
+    torque_map_forms : tuple of str
+        Forms of a torque map offered by :func:`takeup_variants` (``"linear"``: continued along
+        its end slopes; ``"flat"``: a bounded take-up beside the linear stiffness,
+        :func:`torque_map_basis`); a map's own form is the fourth entry of its
+        ``(lo, hi, n, form)`` (default ``"linear"``).
     travel, t_skip : float
         Steady strokes: more than ``travel`` rad since the last reversal; every score leaves
         out the first ``t_skip`` s (and the fit does too).
@@ -153,6 +158,7 @@ class RigSpec:
     transient: float | None = None
     gear_ratio: float | None = None
     input_harmonics: int = 0
+    torque_map_forms: tuple = ("linear",)
     travel: float = 0.06
     t_skip: float = 1.5
     n_iter: int = 20
@@ -315,14 +321,18 @@ def transient_columns(truth, spacing: float, travel: float) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=256)
-def torque_map_basis(lo: float, hi: float, n: int) -> MapBasis:
+def torque_map_basis(lo: float, hi: float, n: int, form: str = "linear") -> MapBasis:
     """Basis of a torque map: cubic B-splines with ``n`` equal intervals over ``[lo, hi]``
-    (N m), constant and linear parts removed, continued along its end slopes beyond the range
-    (:class:`MapBasis` on the torque)."""
+    (N m) (:class:`MapBasis` on the torque). ``form="linear"``: constant and linear parts
+    removed, continued along its end slopes beyond the range; ``"flat"``: a bounded take-up,
+    zero slope at both ends, constant removed, held at its end values beyond the range (the
+    ``linear`` compliance term is then the stiffness at both ends and beyond)."""
     n = int(n)
     if n < 1:
         raise ValueError(f"a torque map needs at least 1 interval, got {n}")
-    return MapBasis(float(lo), float(hi), (float(hi) - float(lo)) / n, extrapolate="linear")
+    if form not in ("linear", "flat"):
+        raise ValueError(f"torque map form {form!r}: expected 'linear' or 'flat'")
+    return MapBasis(float(lo), float(hi), (float(hi) - float(lo)) / n, extrapolate=form)
 
 
 def torque_range(runs: Sequence[Run], channel: str, groups: Mapping | None = None,
@@ -359,7 +369,8 @@ def resolve_torque_map(runs: Sequence[Run], spec: RigSpec, groups: Mapping | Non
     tm = {}
     for channel, v in spec.torque_map.items():
         lo, hi = torque_range(runs, channel, groups, spec.t_skip)
-        tm[channel] = (lo, hi, int(n if n is not None else (v if np.ndim(v) == 0 else v[2])))
+        tm[channel] = (lo, hi, int(n if n is not None else (v if np.ndim(v) == 0 else v[2])),
+                       *(() if np.ndim(v) == 0 else tuple(v[3:])))
     return spec.with_(torque_map=tm)
 
 
@@ -714,6 +725,13 @@ def takeup_variants(runs: Sequence[Run], spec: RigSpec, relative: Sequence[float
             forms.append({"compliance": {c: t for c, t in spec.compliance.items() if c != channel},
                           "torque_scales": {c: v for c, v in spec.torque_scales.items() if c != channel},
                           "torque_map": {c: v for c, v in spec.torque_map.items() if c != channel}})
+    # Other forms of the torque maps (a bounded take-up beside the stiffness: it extrapolates
+    # as a gear does, where a spline continued along its end slopes only interpolates).
+    for form in [f for f in spec.torque_map_forms if f != "linear"]:
+        for f in list(forms):
+            tm = f.get("torque_map", spec.torque_map)
+            if tm and all(np.ndim(v) > 0 for v in tm.values()):
+                forms.append({**f, "torque_map": {c: (*v[:3], form) for c, v in tm.items()}})
     if transient and spec.transient:
         forms = forms + [{**f, "transient": None} for f in forms]
     return forms

@@ -177,6 +177,13 @@ def map_figure(result: Mapping, title: str = "") -> Figure:
     return fig
 
 
+def _tmap_form(v) -> str:
+    """A torque map's form in words: beyond its range, along its end slopes or a bounded take-up."""
+    if len(v) > 3 and v[3] == "flat":
+        return "bounded take-up beside the stiffness"
+    return "continued along its end slopes"
+
+
 def term_label(name: str, spec: rg.RigSpec) -> str:
     """``T``, ``T|T|`` or ``tanh(T/T0)`` of a compliance coefficient's name."""
     channel, _, term = name.partition(":")
@@ -230,7 +237,7 @@ def compliance_figure(result: Mapping, torques: Mapping, title: str = "") -> Fig
         terms = " + ".join(f"{fit.coef[idx[n]]:+.3g} {term_label(n, fit.spec)}"
                            for n in names if n.startswith(ch + ":"))
         if ch in fit.spec.torque_map:
-            terms += f" + map ({fit.spec.torque_map[ch][2]} intervals)"
+            terms += f" + map ({fit.spec.torque_map[ch][2]} intervals, {_tmap_form(fit.spec.torque_map[ch])})"
         ax.set_title(f"{ch}: {terms} (rad, N m)", fontsize=8)
         ax.legend(fontsize=6)
     if title:
@@ -304,7 +311,8 @@ def markdown(name: str, channel: str, result: Mapping, conditions: Sequence[str]
                           + (["compliance " + ", ".join(f"{n.split(':')[0]} {term_label(n, fit.spec)}"
                                                          for n in compliance_names(fit.spec.compliance))]
                              if fit.spec.compliance else [])
-                          + [f"torque map of {c} ({v[2]} intervals over {v[0]:.3g} .. {v[1]:.3g} N m, chosen "
+                          + [f"torque map of {c} ({v[2]} intervals over {v[0]:.3g} .. {v[1]:.3g} N m, "
+                             f"{_tmap_form(v)}, chosen "
                              "on held-out runs)" for c, v in fit.spec.torque_map.items()]
                           + ([f"reversal transient (knots every {fit.spec.transient:g} rad)"] if fit.spec.transient else [])
                           + ([(f"input-side map ({fit.spec.input_harmonics} harmonics per input revolution, "
@@ -472,7 +480,8 @@ def extrapolation_lines(result: Mapping) -> list[str]:
 def _fit_block(fit: rg.RigFit) -> dict:
     block = {"spacing": fit.spec.spacing, "shared": fit.shared(),
              "compliance": dict(fit.spec.compliance), "torque_scales": dict(fit.spec.torque_scales),
-             "torque_map": {c: {"lo": float(v[0]), "hi": float(v[1]), "intervals": int(v[2])}
+             "torque_map": {c: {"lo": float(v[0]), "hi": float(v[1]), "intervals": int(v[2]),
+                                "form": v[3] if len(v) > 3 else "linear"}
                             for c, v in fit.spec.torque_map.items()},
              "transient": fit.spec.transient,
              "ci90": {k: list(v) for k, v in fit.ci().items()}, "per_run": fit.per_run,
@@ -501,6 +510,7 @@ def rule_spec(settings: Mapping, compliance: Mapping) -> tuple[rg.RigSpec, list]
     spec = rg.RigSpec(spacing=max(settings["spacings"]), max_play=settings["max_play"],
                       travel=settings["travel"], t_skip=settings["t_skip"], transient=settings.get("transient"),
                       latency=True if settings.get("latency") == "run" else "shared",
+                      torque_map_forms=tuple(settings.get("torque_map_forms") or ("linear",)),
                       **rg.declared_compliance(compliance, knots[0]))
     return spec, knots
 
