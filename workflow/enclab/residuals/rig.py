@@ -46,6 +46,11 @@ take-up ``tanh(T / T0)`` in place of ``T|T|``, with or without the reversal tran
 the number of intervals of a torque map (on every sample, as the knot spacing). An
 input-side calibration map (harmonics of ``gear_ratio * truth``) is available when a gear ratio
 is declared (``RigSpec(gear_ratio=..., input_harmonics=...)``).
+
+Where the fit holds (:func:`extrapolation`): a condition split whose held-out error is well above
+the other splits' or its training runs' own held-out error does not extrapolate to its test
+conditions; each group of shared terms refitted on the test runs alone says which one carries the
+excess (:func:`refit_shared`), and :func:`coverage` lists the conditions the runs covered.
 """
 from __future__ import annotations
 
@@ -708,8 +713,10 @@ def takeup_variants(runs: Sequence[Run], spec: RigSpec, relative: Sequence[float
     With ``transient`` (and a
     transient in ``spec``) each candidate also comes without the reversal transient: the
     transient is a function of travel, the take-up one of torque, and at the training runs'
-    loads the two can coincide. Returns a list of :meth:`RigSpec.with_` keyword dicts, the
-    declared form first.
+    loads the two can coincide. Every form with a torque map also comes with the map in each
+    further form of ``spec.torque_map_forms`` (``"flat"``: a bounded take-up beside the linear
+    stiffness, :func:`torque_map_basis`). Returns a list of :meth:`RigSpec.with_` keyword dicts,
+    the declared form first.
     """
     channels = [c for c, terms in spec.compliance.items() if "signed_square" in terms]
     forms = [{}]
