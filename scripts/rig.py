@@ -2,7 +2,7 @@
 training runs, scored on held-out runs (docs/residuals.md "Rigs")."""
 from enclab.core import atomic, canonical
 from enclab.residuals import rig
-from enclab.residuals.rig_report import report_rig
+from enclab.residuals.rig_report import report_rig, rule_spec
 from enclab.runner import run
 
 
@@ -14,15 +14,12 @@ def main(smk):
         runs.append(rig.run_from_canonical(df, meta, p.pair["measured"], p.pair["truth"],
                                            list(p.compliance), member["conditions"], member["log_id"]))
     s = dict(p.settings)
-    knots = list(s.get("torque_knots") or [8])
-    spec = rig.RigSpec(spacing=max(s["spacings"]), max_play=s["max_play"],
-                       travel=s["travel"], t_skip=s["t_skip"], transient=s.get("transient"),
-                       latency=True if s.get("latency") == "run" else "shared",
-                       **rig.declared_compliance(p.compliance, knots[0]))
+    spec, knots = rule_spec(s, p.compliance)
     # The compliance's form (declared, or the play take-up), the reversal transient and a torque
     # map's number of intervals are chosen per fold on its training runs, like the knot spacing.
     out = report_rig(smk.wildcards.rig, p.pair["measured"], runs, spec, list(p.splits), s["spacings"],
-                     p.truth_counts_per_rev, variants="takeup", torque_knots=knots)
+                     p.truth_counts_per_rev, variants="takeup", torque_knots=knots,
+                     extrapolation_ratio=s["extrapolation_ratio"])
     atomic.write_json(out["block"], smk.output.block)
     for key in ("heldout", "splits", "conditions"):
         atomic.write_table(out["tables"][key], smk.output[key])

@@ -43,6 +43,9 @@ def angle(df, meta, name):
 
 def test_every_entry_ingests_with_the_expected_size(logs):
     sizes = {log_id: (len(df), meta["n_samples"]) for log_id, (_, df, meta) in logs.items()}
+    # the 50 runs of the second MRDLab run set (measured with enclab: 19 977-20 001 samples)
+    second = [sizes.pop(k) for k in [k for k in sizes if k.startswith("mrdlab_l4_")]]
+    assert len(second) == 50 and all(19_977 <= n == m <= 20_001 for n, m in second)
     # the other 19 runs of the MRDLab rig (measured with enclab: 19 982-20 000 samples per file)
     rig_runs = {k: sizes.pop(k)[0] for k in [k for k in sizes if k.startswith("mrdlab_") and k != "mrdlab_0p5hz"]}
     assert rig_runs == {

@@ -593,3 +593,96 @@ def test_fold_spread_counts_the_folds_that_keep_a_term(sim_rig):
     assert spread["torque_back:linear"]["kept_in"] == 2
     assert "torque_front:linear" in rig.loose_parameters(spread, 0.15)
     assert rig.loose_parameters(spread, np.inf) == ["torque_front:linear"]
+
+
+# ----------------------------------------------------------------------------- extrapolation
+
+
+def test_term_groups_gather_a_torques_terms_and_maps():
+    names = ["scale", "latency", "map0", "map1", "torque_back:linear", "torque_back:signed_square",
+             "tmap_torque_back0", "tmap_torque_back1", "torque_front:linear", "transient0", "input_cos1",
+             "input_sin1"]
+    groups = rig.term_groups(names)
+    assert groups == {"scale": [0], "latency": [1], "map": [2, 3], "torque_back compliance": [4, 5, 6, 7],
+                      "torque_front compliance": [8], "transient": [9], "input": [10, 11]}
+
+
+def test_refit_shared_of_every_term_on_the_training_runs_is_the_fit(sim_rig, sim_fit):
+    # Refitting every shared term on the runs it was fitted on, the play widths held at the
+    # fit's own, is the fit's least-squares problem without the widths' linearised step: the
+    # coefficients agree within a fraction of their jackknife sd (the fit's widths come from the
+    # exact play operator's search after the Gauss-Newton passes, not from their fixed point:
+    # a difference of a few micro-rad that moves the coefficients by ~0.1 sd here).
+    widths = {k: v["play_width"] for k, v in sim_fit.per_run.items()}
+    again = rig.refit_shared(sim_fit, sim_rig[:7], widths=widths)
+    sd = np.sqrt(np.diag(sim_fit.cov))
+    assert np.all(np.abs(again.coef - sim_fit.coef) < 0.25 * sd)
+    # refitting no term changes nothing
+    assert np.array_equal(rig.refit_shared(sim_fit, sim_rig[:7], [], widths).coef, sim_fit.coef)
+
+
+def test_coverage_lists_conditions_and_ranges(sim_rig):
+    cov = rig.coverage(sim_rig[:3], t_skip=1.5)
+    assert cov["conditions"] == {"frequency_hz": [0.5], "load": [0.0, 0.3, 0.6]}
+    lo, hi = cov["torques"]["torque_back"]
+    assert lo < 0 < hi
+    after = np.concatenate([r.measured[r.t >= 1.5] for r in sim_rig[:3]])
+    assert cov["angle"] == [after.min(), after.max()]
+
+
+def test_a_split_that_does_not_extrapolate_is_flagged_and_its_term_blamed(takeup_rig):
+    # The twist takes the play up as tanh(T / 0.01 N m); a softening polynomial T + T|T| fitted on
+    # the two low loads bends the wrong way at the high one (the load split), while the frequency
+    # split sees every load in training. The load split must be flagged, the back torque's
+    # compliance blamed; the frequency split must not be flagged.
+    spec = rig.RigSpec(spacing=None, compliance=SPEC_COMP)
+    splits = [{"name": "frequency", "by": "frequency_hz", "train": [0.5, 1.0], "test": [0.75]},
+              {"name": "load", "by": "load", "train": [0.0, 0.3], "test": [0.6]}]
+    folds = rig.make_folds(takeup_rig, splits)
+    rows, out = rig.evaluate(takeup_rig, spec, folds)
+    ext = {e["split"]: e for e in rig.extrapolation(takeup_rig, rows, out, ratio=2.0)}
+    assert ext["frequency"]["extrapolates"]
+    assert not ext["load"]["extrapolates"] and "training runs' own" in ext["load"]["reason"]
+    assert ext["load"]["blame"] == "torque_back compliance"
+    assert ext["load"]["excess_share"]["torque_back compliance"] > 0.5
+    assert ext["load"]["coverage"]["train"]["conditions"]["load"] == [0.0, 0.3]
+    assert ext["load"]["coverage"]["test"]["conditions"]["load"] == [0.6]
+    # the play take-up, chosen on the training runs, extrapolates (bounded)
+    rows, out = rig.evaluate(takeup_rig, spec, folds, variants="takeup")
+    ext = {e["split"]: e for e in rig.extrapolation(takeup_rig, rows, out, ratio=2.0)}
+    assert ext["load"]["extrapolates"]
+    with pytest.raises(ValueError, match="ratio"):
+        rig.extrapolation(takeup_rig, rows, out, ratio=1.0)
+
+
+def test_flat_torque_map_is_a_bounded_takeup_beside_the_stiffness():
+    # zero slope at both ends (central differences of step h: the second derivative's O(h)),
+    # only the constant removed, held at the end values beyond the range; one column fewer
+    # than the map continued along its end slopes (the slope is not removed, two ends merged)
+    flat = rig.torque_map_basis(-0.1, 0.2, 6, "flat")
+    linear = rig.torque_map_basis(-0.1, 0.2, 6)
+    assert flat.n_columns == linear.n_columns - 1
+    h = 1e-7
+    for end in (-0.1, 0.2):
+        slope = (flat.design([end + h]) - flat.design([end - h])) / (2 * h)
+        inner = (flat.design([0.05 + h]) - flat.design([0.05 - h])) / (2 * h)
+        assert np.max(np.abs(slope)) < 1e-4 * np.max(np.abs(inner))
+    assert np.array_equal(flat.design([-1.0, 1.0]), flat.design([-0.1, 0.2]))
+    grid = np.linspace(-0.1, 0.2, flat.n_grid)
+    assert np.max(np.abs(flat.design(grid).sum(axis=0))) < 1e-8 * grid.size
+    with pytest.raises(ValueError, match="form"):
+        rig.torque_map_basis(-0.1, 0.2, 6, "cubic")
+
+
+def test_takeup_variants_offer_the_flat_torque_map(takeup_rig):
+    spec = rig.RigSpec(compliance={"torque_back": ["linear"], "torque_front": ["linear"]},
+                       torque_map={"torque_back": (-0.05, 0.08, 4)}, torque_map_forms=("linear", "flat"))
+    forms = rig.takeup_variants(takeup_rig, spec, transient=False)
+    maps = [f.get("torque_map", spec.torque_map) for f in forms]
+    assert {v.get("torque_back", (0, 0, 0, "none"))[3:] or ("linear",) for v in maps} == \
+        {("linear",), ("flat",), ("none",)}
+    # the form survives the range's resolution on other runs and the number of intervals' choice
+    flat = spec.with_(torque_map={"torque_back": (-0.05, 0.08, 4, "flat")})
+    assert rig.resolve_torque_map(takeup_rig, flat, None, 8).torque_map["torque_back"][2:] == (8, "flat")
+    fit = rig.fit_rig(takeup_rig[:4], rig.resolve_torque_map(takeup_rig[:4], flat))
+    assert len([n for n in fit.names if n.startswith("tmap")]) == rig.torque_map_basis(0, 1, 4, "flat").n_columns

@@ -91,8 +91,13 @@ def test_rig_rule_writes_the_report(tmp_path):
     assert block["final"]["shared"]["torque_back:linear"] == pytest.approx(0.05, rel=0.2)
     conditions = pd.read_csv(tmp_path / out / "conditions.csv")
     assert set(conditions["condition"]) == {"frequency_hz", "load_pct"}
+    # where the fit holds: the split's verdict against its training runs, what the runs covered
+    ext = block["extrapolation"]
+    assert [e["split"] for e in ext] == ["frequency"] and ext[0]["ratio"] == config["rig"]["extrapolation_ratio"]
+    assert ext[0]["coverage"]["train"]["conditions"]["frequency_hz"] == [0.5, 1.0]
+    assert block["coverage"]["conditions"]["frequency_hz"] == [0.5, 0.75, 1.0]
     report = (tmp_path / out / "report.md").read_text()
-    assert "## Held out" in report and "## What remains" in report
+    assert "## Held out" in report and "## What remains" in report and "## Where the fit holds" in report
     for name in ("map", "compliance", "heldout", "remains"):
         assert (tmp_path / out / f"{name}.png").stat().st_size > 0
     # nothing but ingest and the rig ran

@@ -40,28 +40,46 @@ parameters of each fold and their spread; for a torque map, ``<channel>:twist_cu
 of the twist against that torque on the range the folds' maps share, and the largest deviation of
 a fold's curve from their mean relative to it), and copies both to ``--copy-to`` when given.
 
+``--rules`` instead runs the rig rule's own model (``config.yaml`` ``rig`` settings and the
+manifest's declared compliance, :func:`enclab.residuals.rig_report.report_rig`) on each rig of
+``--rigs`` (default: ``mrdlab_tool4``, the 20 runs of ``Tool_4_Maryland_L_2``, and
+``mrdlab_tool4_l4``, the 50 runs of ``Tool_4_Maryland_L_4`` to 100 % load, whose load split
+trains on loads up to 50 % and tests 60-100 %) and writes ``results/benchmarks/mrdlab_rigs.csv``:
+per rig and split the held-out steady / all std, the training runs' own held-out std, whether the
+split extrapolates and the term that carries its held-out excess, per held-out condition value,
+and the CPU seconds of the fit (``time.process_time``, one BLAS thread as in the rule) beside the
+CPU seconds of a 5M-iteration Python loop measured in the same process.
+
 Usage (from the repository root; needs ../shared/data/real)::
 
     .venv/bin/python workflow/benchmarks/mrdlab_rig.py
     .venv/bin/python workflow/benchmarks/mrdlab_rig.py --models rig --loro --suffix _loro
+    .venv/bin/python workflow/benchmarks/mrdlab_rig.py --rules
 """
 from __future__ import annotations
 
-import argparse
-import shutil
-import sys
-import time
-from pathlib import Path
+import os
 
-import numpy as np
-import pandas as pd
-import yaml
+# One BLAS thread, as the rig rule runs (Snakemake sets it to the rule's threads): on a shared
+# machine, idle BLAS threads spinning on the small products of a rig fit cost more CPU than the fit.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import shutil  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+import yaml  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from enclab.core import atomic, ingest, readers  # noqa: E402
 from enclab.residuals import rig  # noqa: E402
 from enclab.residuals.rig_manifest import rig_groups  # noqa: E402
-from enclab.residuals.rig_report import remains, split_table  # noqa: E402
+from enclab.residuals.rig_report import remains, report_rig, rule_spec, split_table  # noqa: E402
 from provenance import stamp  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -90,18 +108,78 @@ STUDY = {("play+scale", "frequency"): (1.56e-3, 1.89e-3), ("+map", "frequency"):
          ("+map+torque+lag", "frequency"): (0.58e-3, 1.25e-3), ("+map+torque+lag", "load"): (0.73e-3, 1.52e-3)}
 
 
-def load_runs() -> tuple[list[rig.Run], list[dict]]:
+def load_runs(name: str = RIG, with_group: bool = False):
+    """The runs of rig ``name`` of ``data/manifest.real.yaml`` and its splits (and its group:
+    declared compliance, channel pairs, with ``with_group``)."""
     config = yaml.safe_load((ROOT / "config.yaml").read_text())
     data_root, entries = readers.read_manifest(ROOT / "data" / "manifest.real.yaml", devices=config["devices"])
-    group = rig_groups(entries)[RIG]
+    group = rig_groups(entries)[name]
     by_id = {e["id"]: e for e in entries}
     pair = group["pairs"][0]
     runs = []
     for member in group["runs"]:
         df, meta = ingest.ingest_log(by_id[member["log_id"]], ROOT / data_root, config["devices"])
-        runs.append(rig.run_from_canonical(df, meta, pair["measured"], pair["truth"], list(COMP),
-                                           member["conditions"], member["log_id"]))
+        runs.append(rig.run_from_canonical(df, meta, pair["measured"], pair["truth"],
+                                           list(group["compliance"] or COMP), member["conditions"],
+                                           member["log_id"]))
+    if with_group:
+        return runs, group["splits"], group
     return runs, group["splits"]
+
+
+def loop_seconds(n: int = 5_000_000) -> float:
+    """CPU seconds of an ``n``-iteration Python loop: the reference beside a timing."""
+    start = time.process_time()
+    [0 for _ in range(n)]
+    return time.process_time() - start
+
+
+def rule_rows(names) -> list[dict]:
+    """The rig rule's model on each rig of ``names``: held-out std per split (and per condition
+    value), the extrapolation verdict and the CPU seconds of the fit beside a loop reference."""
+    settings = yaml.safe_load((ROOT / "config.yaml").read_text())["rig"]
+    rows = []
+    for name in names:
+        runs, splits, group = load_runs(name, with_group=True)
+        spec, knots = rule_spec(settings, group["compliance"])
+        ref_before = loop_seconds()
+        start = time.process_time()
+        out = report_rig(name, group["pairs"][0]["measured"], runs, spec, splits, settings["spacings"],
+                         variants="takeup", torque_knots=knots,
+                         extrapolation_ratio=settings["extrapolation_ratio"])
+        cpu = time.process_time() - start
+        ref = 0.5 * (ref_before + loop_seconds())
+        ext = {e["split"]: e for e in out["block"]["extrapolation"]}
+        for sp in out["block"]["splits"]:
+            e = ext.get(sp["split"], {})
+            shares = e.get("excess_share") or {}
+            rows.append({"rig": name, "runs": len(runs), "split": sp["split"], "condition": "all test runs",
+                         "value": "", "test_runs": sp["test_runs"],
+                         "before_steady": sp["before_steady"], "before_all": sp["before_all"],
+                         "steady": sp["after_steady"], "all": sp["after_all"], "floor": sp["floor"],
+                         "train_heldout_steady": e.get("inner", {}).get("steady"),
+                         "train_heldout_all": e.get("inner", {}).get("all"),
+                         "x_others_steady": e.get("ratio_to_others", {}).get("steady"),
+                         "x_train_steady": e.get("ratio_to_inner", {}).get("steady"),
+                         "extrapolates": e.get("extrapolates"), "blame": e.get("blame"),
+                         "blame_share": shares.get(e.get("blame")) if e.get("blame") else None,
+                         "form": " | ".join(
+                             "; ".join(f"{c}: {'+'.join(t)}" for c, t in f["compliance"].items())
+                             + "".join(f"; {c} map {v['intervals']} {v['form']}" for c, v in f["torque_map"].items())
+                             + f"; transient {f['transient'] or 'none'}; spacing {f['spacing']}"
+                             for f in out["block"]["folds"] if f["split"] == sp["split"]),
+                         "cpu_s": cpu, "loop_5M_cpu_s": ref})
+        ct = out["tables"]["conditions"]
+        for r in ct.itertuples(index=False):
+            rows.append({"rig": name, "runs": len(runs), "split": r.split, "condition": r.condition,
+                         "value": r.value, "test_runs": r.runs, "before_steady": r.before_steady,
+                         "before_all": r.before_all, "steady": r.after_steady, "all": r.after_all})
+        print(f"{name}: {len(runs)} runs, {cpu:.1f} s CPU (5M loop {ref:.3f} s)", file=sys.stderr)
+        print(out["tables"]["splits"].to_string(), file=sys.stderr)
+        for e in out["block"]["extrapolation"]:
+            print(f"  {e['split']}: extrapolates={e['extrapolates']} {e['reason']} blame={e['blame']} "
+                  f"{e['excess_share']}", file=sys.stderr)
+    return rows
 
 
 def _form(spec: rig.RigSpec) -> str:
@@ -109,6 +187,7 @@ def _form(spec: rig.RigSpec) -> str:
     terms = "; ".join(f"{c}: {'+'.join(t)}" for c, t in spec.compliance.items())
     scales = ", ".join(f"{c} T0={v:.3g} N m" for c, v in spec.torque_scales.items())
     tmap = ", ".join(f"{c} torque map {v[2]} intervals on [{v[0]:.3g}, {v[1]:.3g}] N m"
+                     + (f" ({v[3]})" if len(v) > 3 else "")
                      for c, v in spec.torque_map.items())
     return (f"{terms}{'; ' + scales if scales else ''}{'; ' + tmap if tmap else ''}; "
             f"transient {spec.transient or 'none'}")
@@ -149,10 +228,21 @@ def main(argv=None) -> int:
     parser.add_argument("--out", type=Path, default=ROOT / "results" / "benchmarks")
     parser.add_argument("--copy-to", type=Path, default=None)
     parser.add_argument("--suffix", default="", help="appended to the CSV names (e.g. _loro)")
+    parser.add_argument("--rules", action="store_true",
+                        help="the rig rule's own model on each of --rigs (writes mrdlab_rigs.csv)")
+    parser.add_argument("--rigs", nargs="+", default=[RIG, "mrdlab_tool4_l4"])
     args = parser.parse_args(argv)
     if not (ROOT.parent / "shared" / "data" / "real").is_dir():
         print("../shared/data/real is absent: nothing to analyse", file=sys.stderr)
         return 1
+    if args.rules:
+        args.out.mkdir(parents=True, exist_ok=True)
+        name = f"mrdlab_rigs{args.suffix}.csv"
+        atomic.write_table(stamp(pd.DataFrame(rule_rows(args.rigs))), args.out / name)
+        if args.copy_to:
+            args.copy_to.mkdir(parents=True, exist_ok=True)
+            shutil.copy(args.out / name, args.copy_to / name)
+        return 0
     runs, splits = load_runs()
     rows, params = [], []
     for model in args.models:

@@ -94,6 +94,12 @@ TABLES = [
      "model, split and condition, against the targets and the independent study (`mrdlab_rig.py`)."),
     ("mrdlab_rig_params.csv", "Residual stage: the MRDLab rig's shared parameters",
      "Shared parameters per fold and their spread across folds (`mrdlab_rig.py`)."),
+    ("mrdlab_rigs.csv", "Residual stage: the rig rule on both MRDLab run sets",
+     "The rig rule's model on `Tool_4_Maryland_L_2` (20 runs, loads 10-40 %) and "
+     "`Tool_4_Maryland_L_4` (50 runs, loads 10-100 %): held-out std (rad) per split and condition, "
+     "the training runs' own held-out std, whether the split extrapolates and the term that "
+     "carries its held-out excess, CPU seconds beside a 5M-iteration loop "
+     "(`mrdlab_rig.py --rules`)."),
     ("exact_model_precision.csv", "Exact model: measured/predicted over pooled runs",
      "(`exact_model_precision.py`)."),
     ("design_check.csv", "Design mode: chosen designs against their budgets",

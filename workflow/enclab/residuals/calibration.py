@@ -86,11 +86,14 @@ class MapBasis:
         ``(lo, hi)`` of that grid (default the whole range). The ends of a stroke are where a
         motion reverses and where the data say least about the map; the scale is better
         defined as the slope over the well-covered middle.
-    extrapolate : {"hold", "linear"}
+    extrapolate : {"hold", "linear", "flat"}
         Beyond ``[lo, hi]``: the map held at its end values (``"hold"``: an angle map), or
         continued along its end slopes (``"linear"``: a torque map, whose slope at the end of
         the range is a stiffness that holds beyond it, while the linear part removed on the
-        grid is only the mean slope over the range).
+        grid is only the mean slope over the range), or (``"flat"``: a bounded take-up) splines
+        whose slope is zero at both ends, only their constant removed, held at their end values
+        beyond the range: beside a linear term, the curve's slope at both ends and beyond is
+        that term's, one stiffness, and the map is the take-up between, bounded.
     """
 
     lo: float
@@ -107,8 +110,8 @@ class MapBasis:
             raise ValueError(f"map reference range {self.ref!r} must lie inside [{self.lo!r}, {self.hi!r}]")
         if not (np.isfinite(self.spacing) and self.spacing > 0):
             raise ValueError(f"knot spacing must be positive, got spacing={self.spacing!r}")
-        if self.extrapolate not in ("hold", "linear"):
-            raise ValueError(f"map extrapolation {self.extrapolate!r}: expected 'hold' or 'linear'")
+        if self.extrapolate not in ("hold", "linear", "flat"):
+            raise ValueError(f"map extrapolation {self.extrapolate!r}: expected 'hold', 'linear' or 'flat'")
 
     @property
     def knots(self) -> np.ndarray:
@@ -118,15 +121,27 @@ class MapBasis:
 
     def _raw(self, a) -> np.ndarray:
         a = np.clip(np.asarray(a, dtype=np.float64), self.lo, self.hi)
-        return BSpline.design_matrix(a, self.knots, 3).toarray()
+        B = BSpline.design_matrix(a, self.knots, 3).toarray()
+        if self.extrapolate == "flat":
+            # A clamped cubic's end slope is proportional to c1 - c0 (c[-1] - c[-2] at the other
+            # end): equal coefficients there, zero slope.
+            B = np.column_stack([B[:, 0] + B[:, 1], B[:, 2:-2], B[:, -2] + B[:, -1]])
+        return B
+
+    def _removed(self, a) -> np.ndarray:
+        """The parts removed: the constant, and the slope unless the ends are flat."""
+        a = np.asarray(a, dtype=np.float64)
+        if self.extrapolate == "flat":
+            return np.ones((a.size, 1))
+        return np.column_stack([np.ones_like(a), a])
 
     @cached_property
     def _projection(self):
         ref = np.linspace(*(self.ref or (self.lo, self.hi)), self.n_grid)
-        coef, *_ = np.linalg.lstsq(np.column_stack([np.ones_like(ref), ref]), self._raw(ref), rcond=None)
+        coef, *_ = np.linalg.lstsq(self._removed(ref), self._raw(ref), rcond=None)
         # Directions on the whole range: a B-spline outside the reference range is still a shape.
         grid = np.linspace(self.lo, self.hi, self.n_grid)
-        resid = self._raw(grid) - np.column_stack([np.ones_like(grid), grid]) @ coef
+        resid = self._raw(grid) - self._removed(grid) @ coef
         _, sv, vt = np.linalg.svd(resid, full_matrices=False)
         keep = sv > sv[0] * 1e-9
         # Columns scaled to unit rms on the grid: coefficients are then in rad.
@@ -139,8 +154,17 @@ class MapBasis:
 
     def design(self, a) -> np.ndarray:
         """Columns of the map at angles ``a``: shape ``(len(a), n_columns)``."""
-        coef, rot = self._projection
         a = np.asarray(a, dtype=np.float64)
+        if a.ndim == 1 and a.size > 64:
+            # A quantized angle or torque takes few distinct values: evaluate on those (the
+            # same rows, gathered), not once per sample.
+            u, inv = np.unique(a, return_inverse=True)
+            if 2 * u.size < a.size:
+                return self._design(u)[inv]
+        return self._design(a)
+
+    def _design(self, a) -> np.ndarray:
+        coef, rot = self._projection
         ac = np.clip(a, self.lo, self.hi)
         raw = self._raw(ac)
         if self.extrapolate == "linear":
@@ -150,7 +174,7 @@ class MapBasis:
             d_hi = (self._raw([self.hi]) - self._raw([self.hi - h])) / h
             raw = raw + np.minimum(a - self.lo, 0.0)[:, None] * d_lo + np.maximum(a - self.hi, 0.0)[:, None] * d_hi
             ac = a
-        return (raw - np.column_stack([np.ones_like(ac), ac]) @ coef) @ rot
+        return (raw - self._removed(ac) @ coef) @ rot
 
     def curve(self, coef, a) -> np.ndarray:
         """The map ``m(a)`` for coefficients ``coef`` (rad)."""

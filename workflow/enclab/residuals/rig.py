@@ -46,9 +46,15 @@ take-up ``tanh(T / T0)`` in place of ``T|T|``, with or without the reversal tran
 the number of intervals of a torque map (on every sample, as the knot spacing). An
 input-side calibration map (harmonics of ``gear_ratio * truth``) is available when a gear ratio
 is declared (``RigSpec(gear_ratio=..., input_harmonics=...)``).
+
+Where the fit holds (:func:`extrapolation`): a condition split whose held-out error is well above
+the other splits' or its training runs' own held-out error does not extrapolate to its test
+conditions; each group of shared terms refitted on the test runs alone says which one carries the
+excess (:func:`refit_shared`), and :func:`coverage` lists the conditions the runs covered.
 """
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
@@ -63,7 +69,7 @@ __all__ = ["Run", "RigSpec", "RigFit", "steady_mask", "fit_rig", "predict_run", 
            "choose_model", "takeup_variants", "heldout_rms",
            "inner_groups", "make_folds", "declared_compliance", "torque_map_basis", "torque_range", "resolve_torque_map",
            "evaluate", "pooled", "fold_spread", "loose_parameters", "floor_std", "map_range",
-           "run_from_canonical"]
+           "run_from_canonical", "term_groups", "refit_shared", "coverage", "extrapolation"]
 
 
 @dataclass
@@ -133,6 +139,11 @@ class RigSpec:
         Harmonics per input-side revolution of the input-side calibration map (0 = none): a
         repeatable error of the input encoder or the gear mesh, periodic in the input angle
         (a spline of the output angle cannot hold it once a stroke spans many input turns).
+    torque_map_forms : tuple of str
+        Forms of a torque map offered by :func:`takeup_variants` (``"linear"``: continued along
+        its end slopes; ``"flat"``: a bounded take-up beside the linear stiffness,
+        :func:`torque_map_basis`); a map's own form is the fourth entry of its
+        ``(lo, hi, n, form)`` (default ``"linear"``).
     travel, t_skip : float
         Steady strokes: more than ``travel`` rad since the last reversal; every score leaves
         out the first ``t_skip`` s (and the fit does too).
@@ -152,6 +163,7 @@ class RigSpec:
     transient: float | None = None
     gear_ratio: float | None = None
     input_harmonics: int = 0
+    torque_map_forms: tuple = ("linear",)
     travel: float = 0.06
     t_skip: float = 1.5
     n_iter: int = 20
@@ -313,14 +325,19 @@ def transient_columns(truth, spacing: float, travel: float) -> np.ndarray:
     return B[:, :-2] * direction[:, None]
 
 
-def torque_map_basis(lo: float, hi: float, n: int) -> MapBasis:
+@functools.lru_cache(maxsize=256)
+def torque_map_basis(lo: float, hi: float, n: int, form: str = "linear") -> MapBasis:
     """Basis of a torque map: cubic B-splines with ``n`` equal intervals over ``[lo, hi]``
-    (N m), constant and linear parts removed, continued along its end slopes beyond the range
-    (:class:`MapBasis` on the torque)."""
+    (N m) (:class:`MapBasis` on the torque). ``form="linear"``: constant and linear parts
+    removed, continued along its end slopes beyond the range; ``"flat"``: a bounded take-up,
+    zero slope at both ends, constant removed, held at its end values beyond the range (the
+    ``linear`` compliance term is then the stiffness at both ends and beyond)."""
     n = int(n)
     if n < 1:
         raise ValueError(f"a torque map needs at least 1 interval, got {n}")
-    return MapBasis(float(lo), float(hi), (float(hi) - float(lo)) / n, extrapolate="linear")
+    if form not in ("linear", "flat"):
+        raise ValueError(f"torque map form {form!r}: expected 'linear' or 'flat'")
+    return MapBasis(float(lo), float(hi), (float(hi) - float(lo)) / n, extrapolate=form)
 
 
 def torque_range(runs: Sequence[Run], channel: str, groups: Mapping | None = None,
@@ -357,7 +374,8 @@ def resolve_torque_map(runs: Sequence[Run], spec: RigSpec, groups: Mapping | Non
     tm = {}
     for channel, v in spec.torque_map.items():
         lo, hi = torque_range(runs, channel, groups, spec.t_skip)
-        tm[channel] = (lo, hi, int(n if n is not None else (v if np.ndim(v) == 0 else v[2])))
+        tm[channel] = (lo, hi, int(n if n is not None else (v if np.ndim(v) == 0 else v[2])),
+                       *(() if np.ndim(v) == 0 else tuple(v[3:])))
     return spec.with_(torque_map=tm)
 
 
@@ -429,12 +447,6 @@ def _nuisance(spec: RigSpec, dp: np.ndarray) -> np.ndarray:
     return np.column_stack(cols)
 
 
-def _project(N, *arrays):
-    """Residuals of ``arrays`` after least squares on the columns ``N`` (per-run nuisance)."""
-    q, _ = np.linalg.qr(N)
-    return [x - q @ (q.T @ x) for x in arrays]
-
-
 def _fit_mask(run: Run, spec: RigSpec) -> np.ndarray:
     return run.t >= run.t[0] + spec.t_skip
 
@@ -449,8 +461,14 @@ def _per_run(run: Run, spec: RigSpec, shared_pred: np.ndarray, around: float | N
     def solve(width):
         p, dp = _played(run, width)
         N = _nuisance(spec, dp)[mask]
-        beta, *_ = np.linalg.lstsq(N, (z - p)[mask], rcond=None)
-        res = (z - p)[mask] - N @ beta
+        y = (z - p)[mask]
+        # Least squares on 1 or 2 columns: the normal equations (an SVD per width costs more
+        # than the play operator); lstsq when they are singular (a run at rest).
+        try:
+            beta = np.linalg.solve(N.T @ N, N.T @ y)
+        except np.linalg.LinAlgError:
+            beta = np.linalg.lstsq(N, y, rcond=None)[0]
+        res = y - N @ beta
         return float(res @ res), beta
 
     width = 0.0
@@ -479,20 +497,39 @@ def _play_derivative(p: np.ndarray) -> np.ndarray:
     return -0.5 * motion_sign(np.diff(p, prepend=p[0]))
 
 
-def _normal_equations(runs, spec, basis, a_mid, widths, play_step: bool = False):
-    """Per-run ``(X'X, X'z, Xp, zp, q)`` of the shared columns after projecting out the run's
-    offset, latency and (``play_step``) the linearised play width (fit samples only)."""
-    out = []
-    names = None
+def _columns(runs, spec, basis, a_mid) -> tuple[list, dict]:
+    """Names and, per run id, ``(X, X'X)`` of the shared columns on the fit samples: they do
+    not depend on the play widths, so a fit computes them once, not once per width update."""
+    names, cols = [], {}
     for run in runs:
         names, X = _shared_columns(run, spec, basis, a_mid)
+        X = np.ascontiguousarray(X[_fit_mask(run, spec)])
+        cols[run.run_id] = (X, X.T @ X)
+    return names, cols
+
+
+def _normal_equations(runs, spec, basis, a_mid, widths, play_step: bool = False, columns=None):
+    """Per-run ``(G, h, q, z, N, X)`` of the shared columns after projecting out the run's
+    offset, latency and (``play_step``) the linearised play width (fit samples only):
+    ``G = Xp'Xp`` and ``h = Xp'zp`` of the projected columns ``Xp = X - q q'X`` and reading
+    ``zp = z - q q'z`` (``q``: an orthonormal basis of the nuisance columns ``N``), formed as
+    ``X'X - (q'X)'(q'X)`` so that the projected columns are never built. ``columns``: the
+    :func:`_columns` of ``runs`` (computed here when absent)."""
+    names, cols = _columns(runs, spec, basis, a_mid) if columns is None else columns
+    out = []
+    for run in runs:
+        X, G0 = cols[run.run_id]
         p, dp = _played(run, widths[run.run_id])
         m = _fit_mask(run, spec)
         N = _nuisance(spec, dp)
         if play_step and spec.play:
             N = np.column_stack([N, _play_derivative(p)])
-        Xp, zp = _project(N[m], X[m], (run.measured - p)[m])
-        out.append((Xp.T @ Xp, Xp.T @ zp, Xp, zp, N[m], (run.measured - p)[m], X[m]))
+        N = N[m]
+        z = (run.measured - p)[m]
+        q, _ = np.linalg.qr(N)
+        A = q.T @ X
+        b = q.T @ z
+        out.append((G0 - A.T @ A, X.T @ z - A.T @ b, q, z, N, X))
     return names, out
 
 
@@ -557,15 +594,16 @@ def fit_rig(runs: Sequence[Run], spec: RigSpec, widths: Mapping | None = None) -
     # Gauss-Newton on the play widths: each pass solves the shared terms with every run's
     # offset, latency and play-width step projected out, then moves the widths by their steps
     # (an alternation of the two would converge slowly: widths and shared terms are coupled).
+    columns = _columns(runs, spec, basis, a_mid)
     for _ in range(max(spec.n_iter, 1)):
         w = {k: v["play_width"] for k, v in per.items()}
-        names, eqs = _normal_equations(runs, spec, basis, a_mid, w, play_step=True)
+        names, eqs = _normal_equations(runs, spec, basis, a_mid, w, play_step=True, columns=columns)
         coef = _solve(sum(e[0] for e in eqs), sum(e[1] for e in eqs))
         if not spec.play:
             break
         moved = 0.0
         for run, e in zip(runs, eqs):
-            N, z, X = e[4], e[5], e[6]
+            N, z, X = e[4], e[3], e[5]
             beta, *_ = np.linalg.lstsq(N, z - X @ coef, rcond=None)
             new = float(np.clip(w[run.run_id] + beta[-1], 0.0, spec.max_play))
             moved = max(moved, abs(new - w[run.run_id]))
@@ -579,12 +617,13 @@ def fit_rig(runs: Sequence[Run], spec: RigSpec, widths: Mapping | None = None) -
                   per_run=per, train_ids=[r.run_id for r in runs], jack_coef=jack)
 
 
-def predict_run(fit: RigFit, run: Run) -> tuple[np.ndarray, dict]:
+def predict_run(fit: RigFit, run: Run, around: float | None = None) -> tuple[np.ndarray, dict]:
     """Prediction of a run with the shared terms of ``fit`` fixed and the run's own effects
-    (offset, play width, latency) fitted on it. Returns ``(prediction, per-run effects)``."""
+    (offset, play width, latency) fitted on it (``around``: its play width searched within 2
+    mrad of this one). Returns ``(prediction, per-run effects)``."""
     _, X = _shared_columns(run, fit.spec, fit.basis, fit.a_mid)
     shared = X @ fit.coef
-    per = _per_run(run, fit.spec, shared)
+    per = _per_run(run, fit.spec, shared, around=around)
     return _prediction(run, fit.spec, shared, per), per
 
 
@@ -637,8 +676,9 @@ def heldout_per_run(runs: Sequence[Run], spec: RigSpec, widths: Mapping,
     for key in dict.fromkeys(groups[r.run_id] for r in runs):
         inside = [(k, r.run_id, e) for k, (r, e) in enumerate(zip(runs, eqs)) if groups[r.run_id] == key]
         beta = _solve(G - sum(e[0] for *_, e in inside), h - sum(e[1] for *_, e in inside))
-        for k, run_id, (_, _, Xp, zp, *_) in inside:
-            r = (zp - Xp @ beta)[keep[run_id]]
+        for k, run_id, (_, _, q, z, _, X) in inside:
+            v = z - X @ beta
+            r = (v - q @ (q.T @ v))[keep[run_id]]
             ss[k] = float(r @ r)
             n[k] = r.size
     return ss, n
@@ -673,8 +713,10 @@ def takeup_variants(runs: Sequence[Run], spec: RigSpec, relative: Sequence[float
     With ``transient`` (and a
     transient in ``spec``) each candidate also comes without the reversal transient: the
     transient is a function of travel, the take-up one of torque, and at the training runs'
-    loads the two can coincide. Returns a list of :meth:`RigSpec.with_` keyword dicts, the
-    declared form first.
+    loads the two can coincide. Every form with a torque map also comes with the map in each
+    further form of ``spec.torque_map_forms`` (``"flat"``: a bounded take-up beside the linear
+    stiffness, :func:`torque_map_basis`). Returns a list of :meth:`RigSpec.with_` keyword dicts,
+    the declared form first.
     """
     channels = [c for c, terms in spec.compliance.items() if "signed_square" in terms]
     forms = [{}]
@@ -690,6 +732,13 @@ def takeup_variants(runs: Sequence[Run], spec: RigSpec, relative: Sequence[float
             forms.append({"compliance": {c: t for c, t in spec.compliance.items() if c != channel},
                           "torque_scales": {c: v for c, v in spec.torque_scales.items() if c != channel},
                           "torque_map": {c: v for c, v in spec.torque_map.items() if c != channel}})
+    # Other forms of the torque maps (a bounded take-up beside the stiffness: it extrapolates
+    # as a gear does, where a spline continued along its end slopes only interpolates).
+    for form in [f for f in spec.torque_map_forms if f != "linear"]:
+        for f in list(forms):
+            tm = f.get("torque_map", spec.torque_map)
+            if tm and all(np.ndim(v) > 0 for v in tm.values()):
+                forms.append({**f, "torque_map": {c: (*v[:3], form) for c, v in tm.items()}})
     if transient and spec.transient:
         forms = forms + [{**f, "transient": None} for f in forms]
     return forms
@@ -998,3 +1047,163 @@ def simulate_rig(rng: np.random.Generator, conditions: Sequence[Mapping], *, dur
         runs.append(Run(run_id=f"run{i:02d}", t=t, truth=truth, measured=measured, step=step,
                         truth_step=truth_step, torques=torques, conditions=dict(cond)))
     return runs
+
+
+# ----------------------------------------------------------------------------- extrapolation
+
+
+def term_groups(names: Sequence[str]) -> dict:
+    """``{term: [coefficient index, ...]}`` of a fit's shared coefficient names: ``scale``,
+    ``latency``, ``map`` (the calibration map), ``<channel> compliance`` (every term of that
+    torque: ``linear``, ``signed_square``, ``saturating`` and its torque map), ``transient``
+    and ``input`` (the input-side map)."""
+    out: dict = {}
+    for i, n in enumerate(names):
+        if n.startswith("tmap_"):
+            key = f"{n[5:].rstrip('0123456789')} compliance"
+        elif ":" in n:
+            key = f"{n.split(':')[0]} compliance"
+        else:
+            key = n.rstrip("0123456789")
+            key = {"input_cos": "input", "input_sin": "input"}.get(key, key)
+        out.setdefault(key, []).append(i)
+    return out
+
+
+def refit_shared(fit: RigFit, runs: Sequence[Run], index: Sequence[int] | None = None,
+                 widths: Mapping | None = None) -> RigFit:
+    """``fit`` with the shared coefficients ``index`` (default: all) refitted on ``runs`` and the
+    others held at their values; every run's own offset and latency are projected out as in
+    :func:`fit_rig`, its play width held (``widths``, default those :func:`predict_run` gives
+    under ``fit``).
+
+    On held-out runs this is the question "how much of their error would this term remove,
+    had it been fitted on them": the term that removes most of the held-out excess is the one
+    whose training value does not carry over to the held-out conditions."""
+    if widths is None:
+        widths = {r.run_id: predict_run(fit, r)[1]["play_width"] for r in runs}
+    # The play widths held (not linearised): the refits then minimise the very sum of squares
+    # they are scored on, so refitting more terms never scores worse at those widths.
+    _, eqs = _normal_equations(runs, fit.spec, fit.basis, fit.a_mid, widths)
+    G = sum(e[0] for e in eqs)
+    h = sum(e[1] for e in eqs)
+    coef = fit.coef.copy()
+    idx = np.arange(coef.size) if index is None else np.asarray(index, dtype=int)
+    rest = np.setdiff1d(np.arange(coef.size), idx)
+    coef[idx] = _solve(G[np.ix_(idx, idx)], h[idx] - G[np.ix_(idx, rest)] @ coef[rest])
+    return RigFit(spec=fit.spec, names=list(fit.names), coef=coef, cov=None, basis=fit.basis,
+                  a_mid=fit.a_mid, per_run=fit.per_run, train_ids=list(fit.train_ids))
+
+
+def coverage(runs: Sequence[Run], t_skip: float = 0.0, q: float = 0.005) -> dict:
+    """The conditions a set of runs covers: every condition's values, and the ranges (``q`` to
+    ``1 - q`` quantiles, samples after ``t_skip``) of each logged torque (N m) and of the
+    measured-side angle (rad). A model fitted on them interpolates inside these; beyond them it
+    extrapolates."""
+    conds: dict = {}
+    for r in runs:
+        for k, v in r.conditions.items():
+            conds.setdefault(k, [])
+            if not any(_same(v, u) for u in conds[k]):
+                conds[k].append(v)
+    out = {"conditions": {k: sorted(v, key=lambda x: (str(type(x)), x)) for k, v in conds.items()}}
+    channels = sorted({c for r in runs for c in r.torques})
+    keep = [r.t >= r.t[0] + t_skip for r in runs]
+    out["torques"] = {c: [float(np.quantile(np.concatenate([r.torques[c][m] for r, m in zip(runs, keep)
+                                                             if c in r.torques]), x)) for x in (q, 1 - q)]
+                      for c in channels}
+    a = np.concatenate([r.measured[m] for r, m in zip(runs, keep)])
+    out["angle"] = [float(np.min(a)), float(np.max(a))]
+    return out
+
+
+def _sum_squares(fit: RigFit, runs: Sequence[Run], widths: Mapping | None = None) -> float:
+    """Sum of squares of the residuals of ``runs`` under ``fit`` on every sample after
+    ``t_skip`` (``widths``: play widths to search around)."""
+    return float(sum(score_run(r, predict_run(fit, r, (widths or {}).get(r.run_id))[0], fit.spec)["all_ss"]
+                     for r in runs))
+
+
+def extrapolation(runs: Sequence[Run], rows: Sequence[Mapping], folds_out: Sequence[Mapping],
+                  ratio: float) -> list[dict]:
+    """Whether each condition split's fit extrapolates to its held-out conditions, and if not,
+    which shared term is to blame.
+
+    For each split with a condition (``by``): its held-out std (test runs pooled; steady and
+    all, :func:`pooled`) is compared with (a) the smallest held-out std of the other condition
+    splits and (b) its training runs' own held-out std (:func:`heldout_per_run` with one value
+    of the condition held out at a time, :func:`inner_groups`: what the fit achieves inside
+    the conditions it was trained on). The split *does not extrapolate* when, on steady strokes
+    or on all samples, the held-out std exceeds ``ratio`` times (a) or (b).
+
+    Blame, for every condition split: each group of shared terms (:func:`term_groups`) is
+    refitted on the test runs with the others held at their training values
+    (:func:`refit_shared`); ``excess_share`` is the fraction of the held-out excess (held-out
+    sum of squares minus that with every shared term refitted on the test runs) that refitting
+    the group alone removes, on every sample after ``t_skip`` (what the refit minimises). The
+    term with the largest share is ``blame``.
+
+    Returns one dict per split: ``split``, ``by``, ``heldout`` and ``inner`` (``{steady,
+    all}`` std, rad), ``others`` (the smallest of the other splits'), ``ratio_to_others``,
+    ``ratio_to_inner``, ``extrapolates`` (bool), ``reason``, ``excess_share``, ``blame``,
+    ``refit_all`` (test runs' std, all samples, with every shared term refitted on them) and the training and
+    test runs' ``coverage`` (:func:`coverage`).
+    """
+    if not ratio > 1:
+        raise ValueError(f"extrapolation ratio must exceed 1, got {ratio!r}")
+    by_id = {r.run_id: r for r in runs}
+    splits = list(dict.fromkeys(f["split"] for f in folds_out if f.get("by")))
+    held = {s: pooled([r for r in rows if r["split"] == s]) for s in splits}
+    out = []
+    for s in splits:
+        folds = [f for f in folds_out if f["split"] == s]
+        inner_ss = {"steady": 0.0, "all": 0.0}
+        inner_n = {"steady": 0.0, "all": 0.0}
+        base_ss = oracle_ss = 0.0
+        refit_ss: dict = {}
+        n_test = 0
+        train_runs, test_runs = [], []
+        for f in folds:
+            fit = f["fit"]
+            train = [by_id[i] for i in f["train"]]
+            test = [by_id[i] for i in f["test"]]
+            train_runs += train
+            test_runs += test
+            groups = inner_groups(train, f.get("by"))
+            widths = {k: v["play_width"] for k, v in fit.per_run.items()}
+            if len(set(groups.values())) >= 2:
+                for on in ("steady", "all"):
+                    ss, n = heldout_per_run(train, fit.spec, widths, groups, on)
+                    inner_ss[on] += float(ss.sum())
+                    inner_n[on] += float(n.sum())
+            # Steady sums of squares of the test runs: as held out, every term refitted, each alone.
+            # As held out: the fold's own rows (their play widths: a start for the refits). The
+            # refits minimise the sum of squares on every sample: the shares are taken there.
+            mine = [r for r in rows if r["split"] == s and r["fold"] == f["fold"] and r["role"] == "test"]
+            base_ss += sum(r["all_ss"] for r in mine)
+            n_test += sum(r["n_all"] for r in mine)
+            w = {r["run_id"]: r["play_width"] for r in mine}
+            oracle_ss += _sum_squares(refit_shared(fit, test, widths=w), test, w)
+            for term, idx in term_groups(fit.names).items():
+                refit_ss[term] = refit_ss.get(term, 0.0) + _sum_squares(refit_shared(fit, test, idx, w), test, w)
+        inner = {k: float(np.sqrt(inner_ss[k] / inner_n[k])) if inner_n[k] else float("nan") for k in inner_ss}
+        others = {k: min((held[o][f"{k}_std"] for o in splits if o != s), default=float("nan"))
+                  for k in ("steady", "all")}
+        h = {k: held[s][f"{k}_std"] for k in ("steady", "all")}
+        to_others = {k: h[k] / others[k] if others[k] > 0 else float("nan") for k in h}
+        to_inner = {k: h[k] / inner[k] if inner[k] > 0 else float("nan") for k in h}
+        reasons = [f"held-out {k} std {h[k] * 1e3:.3g} mrad is {to_others[k]:.2f}x the other splits' smallest"
+                   for k in h if to_others[k] > ratio] + \
+                  [f"held-out {k} std {h[k] * 1e3:.3g} mrad is {to_inner[k]:.2f}x its training runs' own "
+                   "held-out std" for k in h if to_inner[k] > ratio]
+        excess = base_ss - oracle_ss
+        shares = {t: float((base_ss - v) / excess) if excess > 0 else float("nan") for t, v in refit_ss.items()}
+        blame = max(shares, key=lambda t: shares[t]) if shares and excess > 0 else None
+        out.append({"split": s, "by": folds[0].get("by"), "heldout": h, "inner": inner, "others": others,
+                    "ratio_to_others": to_others, "ratio_to_inner": to_inner, "ratio": ratio,
+                    "extrapolates": not reasons, "reason": "; ".join(reasons),
+                    "excess_share": shares, "blame": blame,
+                    "refit_all": float(np.sqrt(oracle_ss / n_test)) if n_test else float("nan"),
+                    "coverage": {"train": coverage(train_runs, folds[0]["fit"].spec.t_skip),
+                                 "test": coverage(test_runs, folds[0]["fit"].spec.t_skip)}})
+    return out

@@ -17,11 +17,15 @@ from enclab.residuals import rig as rg
 from enclab.residuals.calibration import compliance_curve, compliance_names
 
 __all__ = ["analyse_rig", "remains", "map_figure", "compliance_figure", "heldout_figure",
-           "remains_figure", "markdown", "condition_table", "split_table"]
+           "remains_figure", "markdown", "condition_table", "split_table", "extrapolation_lines",
+           "coverage_text", "EXTRAPOLATION_RATIO", "rule_spec"]
 
 MRAD = 1e3
 #: Largest relative change of a shared parameter between folds for it to count as pinned down.
 SPREAD = 0.15
+#: Default of ``rig.extrapolation_ratio`` (config.yaml): a split whose held-out std exceeds this
+#: multiple of the other splits' or of its training runs' own held-out std does not extrapolate.
+EXTRAPOLATION_RATIO = 2.0
 
 
 def remains(runs: Sequence[rg.Run], residuals: Mapping, spec: rg.RigSpec, bin_width: float = 0.002) -> dict:
@@ -62,7 +66,8 @@ def remains(runs: Sequence[rg.Run], residuals: Mapping, spec: rg.RigSpec, bin_wi
 
 def analyse_rig(runs: Sequence[rg.Run], spec: rg.RigSpec, splits: Sequence[Mapping],
                 spacings: Sequence[float] | None, variants=None,
-                torque_knots: Sequence[int] | None = None) -> dict:
+                torque_knots: Sequence[int] | None = None,
+                extrapolation_ratio: float = EXTRAPOLATION_RATIO) -> dict:
     """Held-out evaluation of one rig and one measured channel, and the fit on every run.
 
     ``variants``: candidate model forms chosen per fold on its training runs
@@ -76,7 +81,10 @@ def analyse_rig(runs: Sequence[rg.Run], spec: rg.RigSpec, splits: Sequence[Mappi
         ``rows`` (one per fold and run, :func:`enclab.residuals.rig.evaluate`), ``folds``
         (the fold results), ``spread`` (:func:`enclab.residuals.rig.fold_spread` over the folds
         of condition splits), ``remains`` per split, ``final`` (the fit on all runs, its knot
-        spacing chosen by leave-one-run-out) and ``spacing_scores``.
+        spacing chosen by leave-one-run-out), ``spacing_scores``, ``extrapolation`` (per
+        condition split, :func:`enclab.residuals.rig.extrapolation` with ``extrapolation_ratio``)
+        and ``coverage`` (:func:`enclab.residuals.rig.coverage` of all runs: where the final fit
+        stops interpolating).
     """
     folds = rg.make_folds(runs, splits)
     rows, out = rg.evaluate(runs, spec, folds, spacings, keep_residuals=True, variants=variants,
@@ -88,7 +96,9 @@ def analyse_rig(runs: Sequence[rg.Run], spec: rg.RigSpec, splits: Sequence[Mappi
     fspec, scores, _ = rg.choose_model(runs, spec, spacings, variants, torque_knots=torque_knots)
     final = rg.fit_rig(runs, fspec)
     return {"rows": rows, "folds": out, "spread": rg.fold_spread(out) if out else {}, "remains": rem,
-            "final": final, "spacing_scores": scores, "spec": spec}
+            "final": final, "spacing_scores": scores, "spec": spec,
+            "extrapolation": rg.extrapolation(runs, rows, out, extrapolation_ratio),
+            "coverage": rg.coverage(runs, spec.t_skip)}
 
 
 def split_table(rows: Sequence[Mapping]) -> pd.DataFrame:
@@ -167,6 +177,13 @@ def map_figure(result: Mapping, title: str = "") -> Figure:
     return fig
 
 
+def _tmap_form(v) -> str:
+    """A torque map's form in words: beyond its range, along its end slopes or a bounded take-up."""
+    if len(v) > 3 and v[3] == "flat":
+        return "bounded take-up beside the stiffness"
+    return "continued along its end slopes"
+
+
 def term_label(name: str, spec: rg.RigSpec) -> str:
     """``T``, ``T|T|`` or ``tanh(T/T0)`` of a compliance coefficient's name."""
     channel, _, term = name.partition(":")
@@ -220,7 +237,7 @@ def compliance_figure(result: Mapping, torques: Mapping, title: str = "") -> Fig
         terms = " + ".join(f"{fit.coef[idx[n]]:+.3g} {term_label(n, fit.spec)}"
                            for n in names if n.startswith(ch + ":"))
         if ch in fit.spec.torque_map:
-            terms += f" + map ({fit.spec.torque_map[ch][2]} intervals)"
+            terms += f" + map ({fit.spec.torque_map[ch][2]} intervals, {_tmap_form(fit.spec.torque_map[ch])})"
         ax.set_title(f"{ch}: {terms} (rad, N m)", fontsize=8)
         ax.legend(fontsize=6)
     if title:
@@ -294,7 +311,8 @@ def markdown(name: str, channel: str, result: Mapping, conditions: Sequence[str]
                           + (["compliance " + ", ".join(f"{n.split(':')[0]} {term_label(n, fit.spec)}"
                                                          for n in compliance_names(fit.spec.compliance))]
                              if fit.spec.compliance else [])
-                          + [f"torque map of {c} ({v[2]} intervals over {v[0]:.3g} .. {v[1]:.3g} N m, chosen "
+                          + [f"torque map of {c} ({v[2]} intervals over {v[0]:.3g} .. {v[1]:.3g} N m, "
+                             f"{_tmap_form(v)}, chosen "
                              "on held-out runs)" for c, v in fit.spec.torque_map.items()]
                           + ([f"reversal transient (knots every {fit.spec.transient:g} rad)"] if fit.spec.transient else [])
                           + ([(f"input-side map ({fit.spec.input_harmonics} harmonics per input revolution, "
@@ -326,6 +344,7 @@ def markdown(name: str, channel: str, result: Mapping, conditions: Sequence[str]
         for c in ("before_steady", "before_all", "after_steady", "after_all"):
             ct[c] = ct[c] * MRAD
         lines.append(ct.to_markdown(index=False, floatfmt=".3f"))
+    lines += extrapolation_lines(result)
     lines += ["", "## Shared parameters", "", "Fit on all runs with 90 % intervals (delete-one-run jackknife), "
               "and their spread across the folds (largest deviation from the fold mean / |mean|):", ""]
     ci = fit.ci()
@@ -393,10 +412,76 @@ def markdown(name: str, channel: str, result: Mapping, conditions: Sequence[str]
     return "\n".join(lines) + "\n"
 
 
+def _fmt_values(values) -> str:
+    return ", ".join(f"{v:g}" if isinstance(v, (int, float)) else str(v) for v in values)
+
+
+def coverage_text(cov: Mapping) -> str:
+    """The conditions, torque ranges and angle range of a :func:`enclab.residuals.rig.coverage`."""
+    parts = [f"{k} {_fmt_values(v)}" for k, v in cov["conditions"].items()]
+    parts += [f"{c} {lo:.3g} .. {hi:.3g} N m" for c, (lo, hi) in cov["torques"].items()]
+    parts.append(f"measured-side angle {cov['angle'][0]:.3g} .. {cov['angle'][1]:.3g} rad")
+    return "; ".join(parts)
+
+
+def extrapolation_lines(result: Mapping) -> list[str]:
+    """The report's section on where the fit holds: per condition split whether it extrapolates
+    (and the term to blame when not), and the conditions the runs covered."""
+    ext = result.get("extrapolation") or []
+    lines = ["", "## Where the fit holds", ""]
+    if ext:
+        ratio = ext[0]["ratio"]
+        lines += [f"A split does not extrapolate when its held-out std (steady strokes or all samples) exceeds "
+                  f"{ratio:g}x the smallest of the other splits' or {ratio:g}x its training runs' own held-out "
+                  "std (one value of the split's condition held out at a time) (`rig.extrapolation_ratio`). "
+                  "Blame: each shared term refitted on the test runs alone, the others at their training "
+                  "values; its share of the held-out excess (held-out sum of squares on every sample minus "
+                  "that with every shared term refitted on the test runs).", ""]
+        table = []
+        for e in ext:
+            shares = sorted(((v, t) for t, v in e["excess_share"].items() if np.isfinite(v)), reverse=True)
+            table.append({"split": e["split"], "steady": e["heldout"]["steady"] * MRAD,
+                          "all": e["heldout"]["all"] * MRAD,
+                          "training runs held out, steady": e["inner"]["steady"] * MRAD,
+                          "training runs held out, all": e["inner"]["all"] * MRAD,
+                          "x others (steady/all)": f"{e['ratio_to_others']['steady']:.2f} / "
+                                                   f"{e['ratio_to_others']['all']:.2f}",
+                          "x training (steady/all)": f"{e['ratio_to_inner']['steady']:.2f} / "
+                                                     f"{e['ratio_to_inner']['all']:.2f}",
+                          "extrapolates": "yes" if e["extrapolates"] else "**no**",
+                          "excess share by term": ", ".join(f"{t} {v:.0%}" for v, t in shares[:3])})
+        lines.append(pd.DataFrame(table).to_markdown(index=False, floatfmt=".3f"))
+        lines.append("")
+        for e in ext:
+            cov = e["coverage"]
+            if e["extrapolates"]:
+                lines.append(f"- split {e['split']}: extrapolates from its training runs ({coverage_text(cov['train'])}) "
+                             f"to its test runs ({coverage_text(cov['test'])}).")
+            else:
+                blame = e["blame"]
+                share = e["excess_share"].get(blame) if blame else None
+                lines.append(
+                    f"- split {e['split']}: **the fit does not extrapolate** from its training runs "
+                    f"({coverage_text(cov['train'])}) to its test runs ({coverage_text(cov['test'])}): "
+                    f"{e['reason']}."
+                    + (f" The term to blame is {blame}: refitted on the test runs alone it removes {share:.0%} "
+                       f"of the held-out excess (every shared term refitted: std "
+                       f"{e['refit_all'] * MRAD:.3g} mrad on all samples); its training value does not carry over to "
+                       f"{e['by']} outside the training runs' values." if blame else ""))
+        lines.append("")
+    cov = result.get("coverage")
+    if cov:
+        lines += [f"The fit on all runs was trained on: {coverage_text(cov)}. Inside these it interpolates; "
+                  "beyond them its map is held at its end values, a torque map continues along its end "
+                  "slopes, and no held-out run has tested it there."]
+    return lines
+
+
 def _fit_block(fit: rg.RigFit) -> dict:
     block = {"spacing": fit.spec.spacing, "shared": fit.shared(),
              "compliance": dict(fit.spec.compliance), "torque_scales": dict(fit.spec.torque_scales),
-             "torque_map": {c: {"lo": float(v[0]), "hi": float(v[1]), "intervals": int(v[2])}
+             "torque_map": {c: {"lo": float(v[0]), "hi": float(v[1]), "intervals": int(v[2]),
+                                "form": v[3] if len(v) > 3 else "linear"}
                             for c, v in fit.spec.torque_map.items()},
              "transient": fit.spec.transient,
              "ci90": {k: list(v) for k, v in fit.ci().items()}, "per_run": fit.per_run,
@@ -415,14 +500,30 @@ def _fit_block(fit: rg.RigFit) -> dict:
     return block
 
 
+def rule_spec(settings: Mapping, compliance: Mapping) -> tuple[rg.RigSpec, list]:
+    """The rig rule's model from the ``rig`` settings of ``config.yaml`` and a manifest's declared
+    ``compliance``: ``(spec, candidate numbers of torque-map intervals)``. The spec starts at the
+    largest knot spacing; the compliance's form, the reversal transient, a torque map's intervals
+    and the spacing are then chosen per fold on its training runs (:func:`report_rig` with
+    ``variants="takeup"``)."""
+    knots = list(settings.get("torque_knots") or [8])
+    spec = rg.RigSpec(spacing=max(settings["spacings"]), max_play=settings["max_play"],
+                      travel=settings["travel"], t_skip=settings["t_skip"], transient=settings.get("transient"),
+                      latency=True if settings.get("latency") == "run" else "shared",
+                      torque_map_forms=tuple(settings.get("torque_map_forms") or ("linear",)),
+                      **rg.declared_compliance(compliance, knots[0]))
+    return spec, knots
+
+
 def report_rig(name: str, channel: str, runs: Sequence[rg.Run], spec: rg.RigSpec,
                splits: Sequence[Mapping], spacings: Sequence[float] | None,
                truth_counts_per_rev: float | None = None, variants=None,
-               torque_knots: Sequence[int] | None = None) -> dict:
+               torque_knots: Sequence[int] | None = None,
+               extrapolation_ratio: float = EXTRAPOLATION_RATIO) -> dict:
     """Everything the rig rule writes for one measured channel: ``block`` (JSON), ``tables``
     (``heldout`` per fold and run, ``splits``, ``conditions``), ``figures`` (``map``,
     ``compliance``, ``heldout``, ``remains``) and ``markdown``."""
-    result = analyse_rig(runs, spec, splits, spacings, variants, torque_knots)
+    result = analyse_rig(runs, spec, splits, spacings, variants, torque_knots, extrapolation_ratio)
     conditions = list(dict.fromkeys(k for r in runs for k in r.conditions))
     torques = {ch: (float(min(np.percentile(r.torques[ch], 0.5) for r in runs)),
                     float(max(np.percentile(r.torques[ch], 99.5) for r in runs))) for ch in spec.compliance}
@@ -434,7 +535,7 @@ def report_rig(name: str, channel: str, runs: Sequence[rg.Run], spec: rg.RigSpec
         "settings": {"travel": spec.travel, "t_skip": spec.t_skip, "max_play": spec.max_play,
                      "latency": "run" if spec.latency is True else spec.latency,
                      "compliance": dict(spec.compliance), "transient": spec.transient,
-                     "spacings": list(spacings or [])},
+                     "spacings": list(spacings or []), "extrapolation_ratio": extrapolation_ratio},
         "splits": split_table(result["rows"]).to_dict("records"),
         "heldout": rows,
         "folds": [{"split": f["split"], "fold": str(f["fold"]), "test": f["test"],
@@ -442,6 +543,10 @@ def report_rig(name: str, channel: str, runs: Sequence[rg.Run], spec: rg.RigSpec
                    **_fit_block(f["fit"])} for f in result["folds"]],
         "spread": result["spread"], "remains": result["remains"],
         "final": {**_fit_block(result["final"]), "spacing_scores": result["spacing_scores"]},
+        # Per condition split: whether the fit extrapolates to its test conditions, the term
+        # that carries the held-out excess, and what the training and test runs covered.
+        "extrapolation": result["extrapolation"],
+        "coverage": result["coverage"],
     }
     return {
         "block": block,
