@@ -12,7 +12,7 @@ pick, alternating them so that the machine's drift hits all alike; times are med
 Usage::
 
     python workflow/benchmarks/bench_lrde_interval.py
-    python workflow/benchmarks/bench_lrde_interval.py --rounds 21 --out /tmp/interval
+    python workflow/benchmarks/bench_lrde_interval.py --rounds 21 --out results/benchmarks
 
 Writes ``<out>/lrde_interval.csv``.
 """

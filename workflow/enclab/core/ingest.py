@@ -10,7 +10,7 @@ relies on that.
 References
 ----------
 .. [1] Colonnese, N., & Okamura, A. M. Propagation of joint space quantization error to
-   operational space coordinates and their derivatives (``/work/shared/papers/000_*``).
+   operational space coordinates and their derivatives.
 """
 from __future__ import annotations
 
