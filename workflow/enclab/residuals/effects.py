@@ -53,6 +53,7 @@ __all__ = [
     "SofteningCompliance",
     "CalibrationMap",
     "SlowDrift",
+    "LevelShift",
     "MissedCounts",
     "WrapAround",
     "EFFECTS",
@@ -818,6 +819,138 @@ class SlowDrift(Effect):
         return out
 
 
+class LevelShift(Effect):
+    """A change of the reading's offset by ``d`` (rad, any size, not a whole number of steps).
+
+    A torque reversal that takes up a preload, a coupling that slips: the measured side reads
+    ``d`` more from some moment on. Two forms, chosen on the log by :meth:`prepare`:
+
+    ``time``
+        one shift at an unknown time ``t_shift``: ``theta_eff = theta + d [t >= t_shift]``; the
+        time is the split of the current exact-model residual into two levels with the smallest
+        sum of squares (at least ``min_fraction`` of the log on either side);
+    ``sign changes``
+        when a torque or command column is declared (``aux`` key in :attr:`drivers`), a shift at
+        each of its sign changes: ``theta_eff = theta + (d / 2) (s - mean s)`` with ``s`` the
+        sign of the column, held through a dead zone of 5 % of its largest magnitude (a torque
+        that chatters about zero does not toggle the preload). With one reversal in the log it
+        is the ``time`` form at the reversal; it is taken when it reads the residual within the
+        cost of one parameter (``ln N`` in the sum of squares over the noise variance) of the
+        best free time.
+
+    ``d`` is the only continuous parameter. The free time is a searched parameter: the search
+    declines (the effect is not tried) unless its split gains more than that parameter's BIC
+    cost, ``ln N`` noise variances, over no shift. A shift within 0.1 step of a non-zero whole
+    number of steps on a channel without sensor noise is a missed count
+    (:class:`MissedCounts`), not a level shift. Derived: ``t_shift`` (s, the time, or the first
+    sign change), ``t_lo``, ``t_hi`` (the times whose split is within the 90 % chi2_1 profile
+    of the best, residual samples taken as independent: a lower bound of the width),
+    ``at_sign_changes`` (1 for the second form) and ``n_shifts``. Signature: the residual
+    ``measured - truth`` steps by ``d`` at one moment (or at every reversal of the torque) and
+    keeps its level, at every angle and speed.
+    """
+
+    name = "level_shift"
+    additive = True
+    param_names = ("d",)
+    order = 24
+    drivers = ("torque", "command", "current")
+    min_fraction = 0.05
+
+    separated_by = "passes over the same angles before and after the shift"
+
+    def __init__(self):
+        self.t_shift = None
+        self.driver = None
+        self.interval = (float("nan"), float("nan"))
+        self.n_shifts = 0
+
+    def applicable(self, ctx) -> bool:
+        return ctx.t.size >= 4.0 / self.min_fraction
+
+    @classmethod
+    def driver_sign(cls, x) -> np.ndarray:
+        """Sign of a torque or command column held through a dead zone of 5 % of its peak."""
+        x = np.asarray(x, dtype=float)
+        eps = 0.05 * float(np.max(np.abs(x))) if x.size else 0.0
+        return motion_sign(np.where(np.abs(x) > eps, x, 0.0))
+
+    def _driver(self, ctx):
+        for key in self.drivers:
+            if ctx.aux and ctx.aux.get(key) is not None:
+                s = self.driver_sign(ctx.aux[key])
+                if np.any(s[1:] != s[:-1]) and np.all(s != 0):
+                    return key, s
+        return None, None
+
+    def prepare(self, ctx, resid) -> bool:
+        """Find the time (or take the sign changes) from ``resid`` (rad, the exact-model residual
+        of the current model); False when no split earns its cost or it is a missed count."""
+        idx = ctx.fit_idx
+        y = np.asarray(resid, dtype=float)[idx]
+        t = ctx.t[idx]
+        n = y.size
+        y = y - y.mean()
+        ss0 = float(np.sum(y * y))
+        m = max(int(self.min_fraction * n), 2)
+        cs = np.cumsum(y)[:-1]
+        i = np.arange(1, n)
+        # sum of squares removed by two levels split before sample i
+        gain = cs * cs * n / (i * (n - i))
+        gain[:m - 1] = -np.inf
+        gain[n - m:] = -np.inf
+        k = int(np.argmax(gain))
+        if not np.isfinite(gain[k]):
+            return False
+        sse = ss0 - float(gain[k])
+        var = max(sse / max(n - 2, 1), 1e-300)
+        if gain[k] / var <= math.log(n):
+            return False
+        split = k + 1
+        d = float(np.mean(y[split:]) - np.mean(y[:split]))
+        sensor = float(ctx.priv.get("_sensor_var", 0.0)) > (0.25 * ctx.step) ** 2
+        whole = round(d / ctx.step)
+        if not sensor and whole != 0 and abs(d / ctx.step - whole) < 0.1:
+            return False
+        ok = np.flatnonzero(gain >= gain[k] - 2.706 * var) + 1
+        self.t_shift = 0.5 * float(t[split - 1] + t[split])
+        self.interval = (float(t[ok.min() - 1]), float(t[ok.max()]))
+        self.driver, self.n_shifts = None, 1
+        key, s = self._driver(ctx)
+        if key is not None:
+            z = s[idx] - s[idx].mean()
+            zz = float(np.dot(z, z))
+            sse_sign = ss0 - float(np.dot(z, y)) ** 2 / zz if zz > 0 else ss0
+            if (sse_sign - sse) / var < math.log(n):
+                changes = np.flatnonzero(s[1:] != s[:-1]) + 1
+                self.driver, self.n_shifts = key, int(changes.size)
+                self.t_shift = float(ctx.t[changes[0]])
+                self.interval = (float(ctx.t[changes[0] - 1]), float(ctx.t[changes[0]]))
+        return True
+
+    def column(self, t, aux) -> np.ndarray:
+        """``d theta_eff / d d``: the step at ``t_shift`` or the half sign of the driver."""
+        if self.driver is not None:
+            s = self.driver_sign(aux[self.driver])
+            return 0.5 * (s - s.mean())
+        return (np.asarray(t, dtype=float) >= self.t_shift).astype(float)
+
+    def apply(self, theta, t, velocity, aux, params):
+        if self.t_shift is None:
+            return theta
+        return theta + float(params[0]) * self.column(t, aux)
+
+    def nuisance_columns(self, t, aux) -> np.ndarray:
+        """The shift's column (N, 1) at times ``t`` with the log's ``aux`` channels: what a map
+        of the angle is fitted beside (:mod:`enclab.residuals.lookup_table`)."""
+        return self.column(t, aux)[:, None]
+
+    def derived(self, params):
+        return {"t_shift": float("nan") if self.t_shift is None else float(self.t_shift),
+                "t_lo": self.interval[0], "t_hi": self.interval[1],
+                "at_sign_changes": float(self.driver is not None), "n_shifts": float(self.n_shifts)}
+
+
 class MissedCounts(Effect):
     """Missed (or extra) counts: integer steps of the count at unknown times.
 
@@ -1027,6 +1160,7 @@ EFFECTS = (
     Latency,
     TimestampJitter,
     SlowDrift,
+    LevelShift,
     LinePitchHarmonics,
     QuadratureEdges,
     MissedCounts,

@@ -103,7 +103,9 @@ def simulate_log(
     (``k1 T + k2 T|T|``; both need ``torque``, the true torque, which the effect follows),
     ``calibration_map {knots, values}`` (a not-a-knot cubic spline through ``values`` at the
     angles ``knots``, held at its end values outside them), ``slow_drift {rate, quad}``
-    (``rate (t - t_mid) + quad (t - t_mid)^2``, rad/s and rad/s^2), ``missed_counts {times,
+    (``rate (t - t_mid) + quad (t - t_mid)^2``, rad/s and rad/s^2), ``level_shift {time, size}``
+    (the reading ``size`` rad higher from ``time`` on) or ``level_shift {torque, size}`` (half of
+    ``size`` times the sign of the given torque array), ``missed_counts {times,
     jumps}``, ``wrap_around {period}``.
 
     Returns
@@ -154,6 +156,13 @@ def simulate_log(
         p = effects["slow_drift"]
         tm = t - 0.5 * (t[0] + t[-1])
         te = te + p.get("rate", 0.0) * tm + p.get("quad", 0.0) * tm**2
+    if "level_shift" in effects:
+        p = effects["level_shift"]
+        if "torque" in p:  # a preload taken up at every reversal of the torque
+            tq = np.asarray(p["torque"], dtype=float)
+            te = te + 0.5 * p["size"] * np.sign(tq)
+        else:
+            te = te + p["size"] * (t >= p["time"])
     counts = np.floor(te / step + c).astype(np.int64)
     if "quadrature_edges" in effects:
         p = effects["quadrature_edges"]
