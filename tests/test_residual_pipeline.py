@@ -55,13 +55,16 @@ def test_residual_pairs_by_joint_and_opt_out():
     assert pipeline.residual_pairs(entry | {"analysis": {"residuals": False}}) == []
 
 
-def test_float_measured_channel_without_step_is_refused_by_name():
+def test_float_measured_channel_without_step_is_analysed_on_its_detected_grid():
+    # once refused ("no quantization step"): the grid the values sit on is the channel's step
     table = _two_channel(1, 0.0, n=500)
     df, meta = _canonical(table)
     meta["channels"][1].update(storage="float", step=None)
     df["measured"] = table["measured"]
-    with pytest.raises(ValueError, match="measured channel 'measured' has no quantization step"):
-        pipeline.analyse_channel(df, meta, {"measured": "measured", "truth": "truth"}, {})
+    block, _, _ = pipeline.analyse_channel(df, meta, {"measured": "measured", "truth": "truth"},
+                                           {"candidates": ["hysteresis"]})
+    assert block["floor_kind"] == "quantization"
+    assert block["step"] == pytest.approx(OUT_STEP, rel=1e-9)
 
 
 @pytest.fixture(scope="module")

@@ -330,7 +330,8 @@ def spectrum(t, r, nperseg: int = 2048) -> dict:
 
 
 def diagnose(t, truth, measured, step: float, truth_step: float | None = None, *,
-             offset: float | None = None, line_pitch_counts: int = 4, n_bins: int = 24) -> dict:
+             offset: float | None = None, line_pitch_counts: int = 4, n_bins: int = 24,
+             noise_std: float = 0.0) -> dict:
     """Every diagnostic of one measured channel against the exact quantizer model.
 
     Parameters
@@ -343,6 +344,9 @@ def diagnose(t, truth, measured, step: float, truth_step: float | None = None, *
         Measured channel offset ``c``; ``None`` fits it (:func:`fit_offset`).
     line_pitch_counts : int
         Counts per line of the code disc (4 for quadrature decoding).
+    noise_std : float
+        The sensor's own noise (rad, :func:`estimate_floor`): it adds its variance to both
+        floors (for the residual approximately: the effect library's floor is exact).
 
     Returns
     -------
@@ -367,7 +371,8 @@ def diagnose(t, truth, measured, step: float, truth_step: float | None = None, *
         "residual": residual,
         "error_moments": moments(error),
         "residual_moments": moments(residual),
-        "floor": {"error_std": error_floor_std(step, truth_step), "residual_std": floor["std"],
+        "floor": {"error_std": math.sqrt(error_floor_std(step, truth_step) ** 2 + noise_std**2),
+                  "residual_std": math.sqrt(floor["std"] ** 2 + noise_std**2),
                   "residual_p_nonzero": floor["p_nonzero"]},
         "histogram": histogram(error, step, truth_step),
         "conditioned": conditioned(t, truth, counts, residual, n_bins=n_bins,
@@ -553,7 +558,8 @@ def estimate_floor(truth, measured, step: float | None, truth_step: float | None
     not white), so what is left is no larger than the noise. The noise is present when its std is
     above ``noise_fraction`` of the quantization's own std ``step / sqrt(12)`` (below it the
     readings are a hard quantizer's, flickering at the transitions); any noise counts on a
-    channel without a grid.
+    channel without a grid, and a grid whose quantization std is below ``noise_fraction`` of the
+    noise's leaves the kind ``noise`` (the grid is then finer than the noise resolves).
 
     Returns
     -------
@@ -575,9 +581,11 @@ def estimate_floor(truth, measured, step: float | None, truth_step: float | None
     noise = math.sqrt(noise_var)
     if step is None:
         kind = "noise"
-    elif noise > noise_fraction * math.sqrt(q_var):
-        kind = "both"
-    else:
+    elif noise <= noise_fraction * math.sqrt(q_var):
         kind, noise = "quantization", 0.0
+    elif math.sqrt(q_var) < noise_fraction * noise:
+        kind = "noise"
+    else:
+        kind = "both"
     return {"kind": kind, "step": step, "noise_std": noise, "noise_lag": vg["lag"],
             "quantization_std": math.sqrt(q_var), "std": math.sqrt(q_var + noise * noise + ts * ts / 12.0)}
