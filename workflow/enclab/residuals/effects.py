@@ -44,6 +44,7 @@ __all__ = [
     "Hysteresis",
     "Backlash",
     "AngleHarmonics",
+    "HarmonicMap",
     "LinePitchHarmonics",
     "QuadratureEdges",
     "Latency",
@@ -389,6 +390,86 @@ class AngleHarmonics(Effect):
             "amp2": math.hypot(params["a2"], params["b2"]),
             "phase2": math.atan2(params["a2"], params["b2"]),
         }
+
+
+class HarmonicMap(Effect):
+    """Angle error of the measured side as harmonics ``1 .. K`` of the angle, ``K`` chosen on
+    held-out data: the calibration form of interpolating magnetic encoders and resolvers.
+
+    ``theta_eff = theta + sum_k a_k cos(k theta) + b_k sin(k theta)`` (rad), on the smooth angle.
+    :meth:`prepare` fits the current exact-model residual with each order ``1 .. max_order`` on
+    every other of ``n_blocks`` time blocks, scores it on the blocks between (both ways), and
+    takes the order with the smallest held-out error; the map is not tried when that order is
+    below 3 (the once- and twice-per-turn terms are :class:`AngleHarmonics`) or the motion does
+    not cover a full turn (a periodic map is then no calibration; :class:`CalibrationMap` maps a
+    partial stroke). Signature: a residual periodic in the angle with three or more cycles per
+    turn beside the first two. Derived: ``order`` and ``amp1 .. ampK`` (rad).
+    """
+
+    name = "harmonic_map"
+    additive = True
+    order = 20
+    max_order = 8
+    n_blocks = 40
+    heldout_interleave = 10
+
+    separated_by = _FULL_TURN
+
+    def __init__(self):
+        self.param_names = ()
+        self.n_harmonics = 0
+
+    def applicable(self, ctx) -> bool:
+        return float(np.ptp(ctx.truth)) >= 2.0 * np.pi
+
+    @staticmethod
+    def design(a, order: int) -> np.ndarray:
+        """``[cos a, sin a, ..., cos Ka, sin Ka]`` (N, 2K)."""
+        a = np.asarray(a, dtype=float)
+        return np.column_stack([f(k * a) for k in range(1, order + 1) for f in (np.cos, np.sin)])
+
+    def prepare(self, ctx, resid) -> bool:
+        idx = ctx.fit_idx
+        a = (ctx.priv["_smooth"] if "_smooth" in ctx.priv else ctx.truth)[idx]
+        y = np.asarray(resid, dtype=float)[idx]
+        blocks = run_blocks(ctx.truth[idx], self.n_blocks)
+        halves = (np.concatenate(blocks[0::2]), np.concatenate(blocks[1::2]))
+        full = np.column_stack([np.ones(a.size), self.design(a, self.max_order)])
+        errs = []
+        for k in range(0, self.max_order + 1):
+            D = full[:, :1 + 2 * k]
+            err = 0.0
+            for fit, test in (halves, halves[::-1]):
+                coef, *_ = np.linalg.lstsq(D[fit], y[fit], rcond=None)
+                err += float(np.sum((y[test] - D[test] @ coef) ** 2))
+            errs.append(err)
+        best = int(np.argmin(errs))
+        if best < 3:
+            return False
+        self.n_harmonics = best
+        self.param_names = tuple(f"{c}{k}" for k in range(1, best + 1) for c in ("a", "b"))
+        self._cache = None
+        return True
+
+    def _design(self, aux):
+        a = aux["_smooth"]
+        cached = getattr(self, "_cache", None)
+        if cached is None or cached[0] is not a or cached[1] != self.n_harmonics:
+            self._cache = (a, self.n_harmonics, self.design(a, self.n_harmonics))
+        return self._cache[2]
+
+    def columns(self, aux):
+        """``d theta_eff / d (a1, b1, ...)``: the harmonics at the smooth angle."""
+        return self._design(aux).T
+
+    def apply(self, theta, t, velocity, aux, params):
+        return theta + self._design(aux) @ np.asarray(params, dtype=float)
+
+    def derived(self, params):
+        out = {"order": float(self.n_harmonics)}
+        for k in range(1, self.n_harmonics + 1):
+            out[f"amp{k}"] = math.hypot(params.get(f"a{k}", 0.0), params.get(f"b{k}", 0.0))
+        return out
 
 
 class LinePitchHarmonics(Effect):
@@ -1156,6 +1237,7 @@ EFFECTS = (
     SofteningCompliance,
     ScaleMismatch,
     AngleHarmonics,
+    HarmonicMap,
     CalibrationMap,
     Latency,
     TimestampJitter,
