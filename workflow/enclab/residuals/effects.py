@@ -954,7 +954,11 @@ class LevelShift(Effect):
         """Sign of a torque or command column held through a dead zone of 5 % of its peak."""
         x = np.asarray(x, dtype=float)
         eps = 0.05 * float(np.max(np.abs(x))) if x.size else 0.0
-        return motion_sign(np.where(np.abs(x) > eps, x, 0.0))
+        s = motion_sign(np.where(np.abs(x) > eps, x, 0.0))
+        first = np.flatnonzero(s)
+        if first.size:  # before the column first leaves the dead zone: the sign it leaves with
+            s[:first[0]] = s[first[0]]
+        return s
 
     def _driver(self, ctx):
         for key in self.drivers:
