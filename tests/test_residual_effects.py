@@ -447,3 +447,13 @@ def test_harmonic_map_order_is_chosen_on_heldout_blocks():
     assert not fx.HarmonicMap().prepare(ctx, fx.HarmonicMap.design(a, 2) @ np.array([0, 0, 1e-3, 5e-4])
                                         + rng.normal(0.0, 2e-4, n))
     assert not fx.HarmonicMap().applicable(_Ctx(np.zeros(n), truth=np.linspace(0.0, 6.0, n)))
+
+
+def test_level_shift_declines_a_transient_at_the_start():
+    # a level that holds only for the first 1 % of the log: the best split is on the edge of the
+    # searched range (5 %), a transient at the start and no shift
+    rng = np.random.default_rng(9)
+    n = 6000
+    ctx = _ShiftCtx(n)
+    resid = rng.uniform(-STEP / 2, STEP / 2, n) + 3.4 * STEP * (ctx.t < 0.06)
+    assert not fx.LevelShift().prepare(ctx, resid)

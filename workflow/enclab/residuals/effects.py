@@ -921,7 +921,8 @@ class LevelShift(Effect):
 
     ``d`` is the only continuous parameter. The free time is a searched parameter: the search
     declines (the effect is not tried) unless its split gains more than that parameter's BIC
-    cost, ``ln N`` noise variances, over no shift. A shift within 0.1 step of a non-zero whole
+    cost, ``ln N`` noise variances, over no shift, and when the best split lies on the edge of
+    the searched range (a transient at the log's start or end). A shift within 0.1 step of a non-zero whole
     number of steps on a channel without sensor noise is a missed count
     (:class:`MissedCounts`), not a level shift. Derived: ``t_shift`` (s, the time, or the first
     sign change), ``t_lo``, ``t_hi`` (the times whose split is within the 90 % chi2_1 profile
@@ -985,7 +986,9 @@ class LevelShift(Effect):
         gain[:m - 1] = -np.inf
         gain[n - m:] = -np.inf
         k = int(np.argmax(gain))
-        if not np.isfinite(gain[k]):
+        if not np.isfinite(gain[k]) or k in (m - 1, n - m - 1):
+            # a best split on the edge of the searched range would sit nearer the log's start or
+            # end: a transient there (a motion that starts late, a settling sensor), no shift
             return False
         sse = ss0 - float(gain[k])
         var = max(sse / max(n - 2, 1), 1e-300)
