@@ -179,6 +179,9 @@ class Effect:
     additive = False
     order = 50
     boundary: tuple = ()
+    #: The effect is an error of the measured angle (a calibration a controller's lookup table
+    #: holds, :mod:`enclab.residuals.lookup_table`); the others are fitted beside such a table.
+    angle_map = False
 
     def applicable(self, ctx) -> bool:
         """Whether the effect can be fitted with the data in ``ctx`` (default: yes)."""
@@ -361,6 +364,7 @@ class AngleHarmonics(Effect):
     name = "angle_harmonics"
     param_names = ("a1", "b1", "a2", "b2")
     order = 20
+    angle_map = True
 
     separated_by = _FULL_TURN
 
@@ -409,6 +413,7 @@ class HarmonicMap(Effect):
     name = "harmonic_map"
     additive = True
     order = 20
+    angle_map = True
     max_order = 8
     n_blocks = 40
     heldout_interleave = 10
@@ -616,6 +621,7 @@ class ScaleMismatch(Effect):
     name = "scale_mismatch"
     param_names = ("g",)
     order = 21
+    angle_map = True
 
     separated_by = _FULL_TURN
 
@@ -745,6 +751,7 @@ class CalibrationMap(Effect):
     name = "calibration_map"
     additive = True
     order = 22
+    angle_map = True
     divisions = tuple(range(3, 25))
     min_spacing = 0.02
     min_stroke = 0.2
@@ -1027,11 +1034,6 @@ class LevelShift(Effect):
         if self.t_shift is None:
             return theta
         return theta + float(params[0]) * self.column(t, aux)
-
-    def nuisance_columns(self, t, aux) -> np.ndarray:
-        """The shift's column (N, 1) at times ``t`` with the log's ``aux`` channels: what a map
-        of the angle is fitted beside (:mod:`enclab.residuals.lookup_table`)."""
-        return self.column(t, aux)[:, None]
 
     def derived(self, params):
         return {"t_shift": float("nan") if self.t_shift is None else float(self.t_shift),

@@ -208,20 +208,33 @@ def sensor_floor(truth, measured, step, truth_step, *, declared_step=None, offse
     return floor, float(step_a), truth_step, np.asarray(measured, float)
 
 
-def channel_angle_map(t, measured, truth, offset, res, aux, *, step=None, n_entries=256, max_order=8) -> dict:
+def channel_angle_map(t, measured, truth, offset, res, *, step=None, n_entries=256, max_order=8) -> dict:
     """:func:`enclab.residuals.lookup_table.angle_map` of one channel: the error
-    ``measured - truth - offset`` against the measured angle, beside the columns of the chosen
-    effects that declare ``nuisance_columns`` (a level shift)."""
+    ``measured - truth - offset`` against the measured angle, beside the shift of the angle that
+    the chosen effects other than angle maps make (a level shift, a compliance, a play, a
+    drift: their joint shift as one column with a free coefficient), so that the map is not bent
+    by them. The effects marked ``angle_map`` (harmonics, a calibration map, a scale) are what
+    the table holds and are left to it."""
     from enclab.residuals import lookup_table
 
-    fitted = getattr(res, "_fitted", None)
-    cols = [e.nuisance_columns(t, aux) for e in (fitted.model.effects if fitted is not None else [])
-            if hasattr(e, "nuisance_columns")]
-    nuisance = np.column_stack(cols) if cols else None
+    nuisance = None
+    fitted, ctx = getattr(res, "_fitted", None), getattr(res, "_ctx", None)
+    if fitted is not None and ctx is not None:
+        x = np.array(fitted.x, dtype=float)
+        others = False
+        for e, sl in zip(fitted.model.effects, fitted.model.slices):
+            if getattr(e, "angle_map", False):
+                x[sl] = e.null()
+            else:
+                others = True
+        if others:
+            mu, _ = fitted.model.forward(ctx, x)
+            shift = (mu - x[0]) * ctx.step - ctx.truth
+            if float(np.ptp(shift)) > 0:
+                nuisance = shift[:, None]
     measured = np.asarray(measured, float)
     return lookup_table.angle_map(measured, measured - np.asarray(truth, float) - offset, n_entries=n_entries,
                                   max_order=max_order, nuisance=nuisance, step=step)
-
 
 def analyse_channel(df: pd.DataFrame, meta: Mapping, pair: Mapping, settings: Mapping | None = None,
                     selector: Callable | None = None) -> tuple[dict, dict, pd.DataFrame]:
@@ -306,7 +319,7 @@ def analyse_channel(df: pd.DataFrame, meta: Mapping, pair: Mapping, settings: Ma
         message = f"{message}; {outside}"
     selection.update(explained=bool(res.explained), message=message, covariates=ranking,
                      outside_catalogue=outside)
-    amap = channel_angle_map(t, measured, truth, offset, res, aux, step=floor["step"],
+    amap = channel_angle_map(t, measured, truth, offset, res, step=floor["step"],
                              n_entries=int(cfg["lut_entries"]), max_order=int(cfg["map_max_order"]))
     block = {
         "log_id": log_id, "measured": pair["measured"], "truth": pair["truth"],
