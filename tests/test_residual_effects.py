@@ -338,3 +338,122 @@ def test_calibration_map_spacing_is_chosen_on_heldout_data():
     np.testing.assert_allclose(e.apply(a, None, None, aux, p) - a, e.basis.design(a) @ p, rtol=0, atol=1e-15)
     np.testing.assert_allclose(e.columns(aux).T @ p, e.basis.design(a) @ p, rtol=0, atol=1e-15)
     assert e.derived(dict(zip(e.param_names, p)))["spacing"] == pytest.approx(e.basis.spacing)
+
+
+class _ShiftCtx(_Ctx):
+    """A context with times, a sensor noise entry and optional aux channels."""
+
+    def __init__(self, n, aux=None, sensor_var=0.0, truth=None):
+        super().__init__(np.zeros(n), truth=truth)
+        self.aux = dict(aux or {})
+        self.priv["_sensor_var"] = sensor_var
+
+
+def test_level_shift_prepare_finds_the_time_and_leaves_whole_counts_to_missed_counts():
+    rng = np.random.default_rng(4)
+    n = 6000
+    ctx = _ShiftCtx(n)
+    noise = rng.uniform(-STEP / 2, STEP / 2, n)
+    e = fx.LevelShift()
+    assert e.applicable(ctx)
+    # 0.37 step from sample 3700 on (t = 3.7 s)
+    assert e.prepare(ctx, noise + 0.37 * STEP * (ctx.t >= 3.7))
+    assert e.t_shift == pytest.approx(3.7, abs=2e-3)
+    assert e.interval[0] <= 3.7 <= e.interval[1] + 1e-3
+    np.testing.assert_array_equal(e.apply(np.zeros(n), ctx.t, None, {}, [0.37 * STEP]),
+                                  0.37 * STEP * (ctx.t >= e.t_shift))
+    # two whole counts on a hard quantizer: a missed count, not a level shift
+    assert not fx.LevelShift().prepare(ctx, noise + 2 * STEP * (ctx.t >= 3.7))
+    # the same on a noisy sensor is a level shift (its grid is no count of the sensor's)
+    noisy = _ShiftCtx(n, sensor_var=STEP**2)
+    assert fx.LevelShift().prepare(noisy, noise + 2 * STEP * (noisy.t >= 3.7))
+    # nothing but noise: a split is proposed only when it gains more than ln N = 8.7 noise
+    # variances. The largest split statistic of white noise over [5 %, 95 %] of the log exceeds
+    # c with probability ~ P(chi2_1 > c) + sqrt(c) exp(-c/2) / sqrt(2 pi) ln(0.95^2 / 0.05^2)
+    # (Andrews 1993), 0.092 at c = 8.7: of 40 white logs, 3.7 on average (binomial sd 1.8);
+    # more than 10 would be 3.5 sd above it
+    proposed = sum(fx.LevelShift().prepare(ctx, np.random.default_rng(100 + k).uniform(-STEP / 2, STEP / 2, n))
+                   for k in range(40))
+    assert proposed <= 10
+
+
+def test_level_shift_at_the_torque_sign_changes_matches_the_simulated_preload():
+    rng = np.random.default_rng(6)
+    n = 8000
+    t = np.arange(n) / 1000.0
+    torque = np.sin(2 * np.pi * 0.25 * t) + 0.02 * rng.normal(size=n)   # three reversals, chatter at zero
+    ctx = _ShiftCtx(n, aux={"torque": torque})
+    size = 0.6 * STEP
+    motion = lambda tt: 0.5 * np.sin(2 * np.pi * 0.7 * np.asarray(tt))  # noqa: E731
+    log = simulate_log(rng, motion, duration=8.0, step=STEP, truth_step=STEP / 64,
+                       effects={"level_shift": {"torque": torque, "size": size}}, offset_frac=0.5)
+    clean = simulate_log(np.random.default_rng(6), motion, duration=8.0, step=STEP, truth_step=STEP / 64,
+                         offset_frac=0.5)
+    e = fx.LevelShift()
+    resid = rng.uniform(-STEP / 2, STEP / 2, n) + 0.5 * size * fx.LevelShift.driver_sign(torque)
+    assert e.prepare(ctx, resid)
+    assert e.derived({"d": size})["at_sign_changes"] == 1.0 and e.n_shifts == 3
+    # brute force: the simulator adds size/2 sign(torque) to the continuous angle; the effect's
+    # shift differs from it by a constant (the quantizer offset) only, away from the dead zone
+    theta = log["theta"]
+    model = e.apply(theta, t, None, {"torque": torque}, [size])
+    sim = theta + 0.5 * size * np.sign(torque)
+    away = np.abs(torque) > 0.1
+    diff = (model - sim)[away]
+    assert np.ptp(diff) < 1e-15 + 1e-12 * size
+    # and the readings it predicts are the simulator's wherever the angle is not within the
+    # float rounding of a transition
+    k_model = np.floor((model - diff[0]) / STEP + 0.5)
+    assert np.mean(k_model[away] == log["counts"][away]) > 0.999
+    assert not np.array_equal(log["counts"], clean["counts"])
+
+
+@pytest.mark.slow
+def test_level_shift_selected_on_a_brute_force_simulated_log():
+    from enclab.residuals.select import select_effects
+
+    rng = np.random.default_rng(3)
+    motion = lambda tt: 0.8 * np.sin(2 * np.pi * 0.6 * np.asarray(tt)) + 0.2 * np.sin(2 * np.pi * 1.3 * np.asarray(tt))  # noqa: E731
+    size, when = 0.37 * STEP, 3.3
+    log = simulate_log(rng, motion, duration=6.0, step=STEP, truth_step=STEP / 64,
+                       effects={"level_shift": {"time": when, "size": size}})
+    res = select_effects(log["t"], log["truth"], log["measured"], STEP, truth_step=STEP / 64,
+                         candidates=["level_shift", "slow_drift", "missed_counts", "hysteresis"])
+    assert [e.name for e in res.effects] == ["level_shift"]
+    e = res.effects[0]
+    lo, hi = e.ci["d"]
+    assert lo <= size <= hi
+    # the time's profile interval, widened by one sample period (the split lies between samples)
+    assert e.derived["t_lo"] - 1e-3 <= when <= e.derived["t_hi"] + 1e-3
+
+
+def test_harmonic_map_order_is_chosen_on_heldout_blocks():
+    rng = np.random.default_rng(8)
+    n = 12000
+    a = 2 * np.pi * 0.5 * np.arange(n) / 1000.0 + 0.6 * np.sin(2 * np.pi * 0.3 * np.arange(n) / 1000.0)  # 6 turns
+    true = fx.HarmonicMap.design(a, 4) @ np.array([2e-3, -1e-3, 8e-4, 6e-4, -4e-4, 3e-4, 3e-4, 2e-4])
+    ctx = _Ctx(np.zeros(n), truth=a)
+    e = fx.HarmonicMap()
+    assert e.applicable(ctx)
+    assert e.prepare(ctx, true + rng.normal(0.0, 2e-4, n))
+    assert e.n_harmonics >= 4
+    assert e.param_names[:2] == ("a1", "b1")
+    aux = {"_smooth": a}
+    p = rng.normal(0.0, 1e-4, len(e.param_names))
+    # (the sum with an angle of up to 25 rad is exact to its last bits: ~25 * 2.2e-16)
+    np.testing.assert_allclose(e.apply(a, None, None, aux, p) - a, e.columns(aux).T @ p, rtol=0, atol=1e-13)
+    # a twice-per-turn error alone is angle_harmonics' (the map declines), and a stroke short of
+    # a turn is no revolution to map
+    assert not fx.HarmonicMap().prepare(ctx, fx.HarmonicMap.design(a, 2) @ np.array([0, 0, 1e-3, 5e-4])
+                                        + rng.normal(0.0, 2e-4, n))
+    assert not fx.HarmonicMap().applicable(_Ctx(np.zeros(n), truth=np.linspace(0.0, 6.0, n)))
+
+
+def test_level_shift_declines_a_transient_at_the_start():
+    # a level that holds only for the first 1 % of the log: the best split is on the edge of the
+    # searched range (5 %), a transient at the start and no shift
+    rng = np.random.default_rng(9)
+    n = 6000
+    ctx = _ShiftCtx(n)
+    resid = rng.uniform(-STEP / 2, STEP / 2, n) + 3.4 * STEP * (ctx.t < 0.06)
+    assert not fx.LevelShift().prepare(ctx, resid)

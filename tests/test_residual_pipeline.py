@@ -55,13 +55,16 @@ def test_residual_pairs_by_joint_and_opt_out():
     assert pipeline.residual_pairs(entry | {"analysis": {"residuals": False}}) == []
 
 
-def test_float_measured_channel_without_step_is_refused_by_name():
+def test_float_measured_channel_without_step_is_analysed_on_its_detected_grid():
+    # once refused ("no quantization step"): the grid the values sit on is the channel's step
     table = _two_channel(1, 0.0, n=500)
     df, meta = _canonical(table)
     meta["channels"][1].update(storage="float", step=None)
     df["measured"] = table["measured"]
-    with pytest.raises(ValueError, match="measured channel 'measured' has no quantization step"):
-        pipeline.analyse_channel(df, meta, {"measured": "measured", "truth": "truth"}, {})
+    block, _, _ = pipeline.analyse_channel(df, meta, {"measured": "measured", "truth": "truth"},
+                                           {"candidates": ["hysteresis"]})
+    assert block["floor_kind"] == "quantization"
+    assert block["step"] == pytest.approx(OUT_STEP, rel=1e-9)
 
 
 @pytest.fixture(scope="module")
@@ -118,6 +121,7 @@ def test_summary_block_and_batch_rows(analysed):
     # a 0.01 rad play (13 steps) is told apart from every alternative; both logs are explained
     assert "runner-up" in rows[0]["effects"] and rows[0]["indistinguishable"] == ""
     assert [r["verdict"] for r in rows] == ["explained", "explained"]
+    assert [r["floor_kind"] for r in rows] == ["quantization", "quantization"]
 
 
 def test_report_text_spells_out_indistinguishable_and_unexplained():
@@ -161,8 +165,14 @@ def test_plain_csv_one_entry_manifest_end_to_end(tmp_path):
     assert "quantization" not in summary  # a continuous truth: the residual stage alone
     assert [e["name"] for e in block["effects"]][:1] == ["backlash"]
     out = tmp_path / "results/rig/residuals/output"
-    for name in ("residuals.json", "before_after.csv", "diagnostics.png", "before_after.png", "covariates.png"):
+    for name in ("residuals.json", "before_after.csv", "diagnostics.png", "before_after.png", "covariates.png",
+                 "lookup_table.csv", "lookup_table.json"):
         assert (out / name).stat().st_size > 0
+    # the floor's kind and the lookup table's paths, per channel (a hard 4096-cpr quantizer)
+    chan = block["channels"]["output"]
+    assert chan["floor_kind"] == "quantization"
+    assert chan["lookup_table"]["csv"].endswith("results/rig/residuals/output/lookup_table.csv")
+    assert len(pd.read_csv(out / "lookup_table.csv")) == 256
     batch = pd.read_csv(tmp_path / "results/batch/residuals.csv")
     assert list(batch["log_id"]) == ["rig"] and batch["after_std"][0] < batch["before_std"][0]
     assert (tmp_path / "logs/rig.csv").read_bytes() == raw

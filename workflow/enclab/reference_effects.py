@@ -40,6 +40,10 @@ _NO_TERM = {
     "slow_drift": "a slow drift of the reading moves a_eq over the log; the model's a_eq is "
                   "constant, so its a_eq and E_b hold only as averages over the log",
     "wrap_around": "a counter wrap; not expected on a stroke of a few steps",
+    "level_shift": "a change of the reading's offset during the log; the model's a_eq is "
+                   "constant, so its a_eq and E_b hold only as averages over the log",
+    "harmonic_map": "an angle error of three or more cycles per turn; over a stroke of a few "
+                    "steps it acts as a scale and offset error of the reading",
     "truth_quantization": "the reference channel's own quantization",
 }
 
@@ -51,6 +55,7 @@ _BREAKS = {
     "slow_drift": ("a_eq", "E_b", "offset_a"),          # a_eq is constant in the model
     "quadrature_edges": ("A12", "a_eq", "E_b", "offset_a"),  # the levels are evenly spaced
     "missed_counts": ("a_eq", "E_b", "offset_a"),       # more than the one modelled jump
+    "level_shift": ("a_eq", "E_b", "offset_a"),         # a_eq is constant in the model
 }
 
 

@@ -1,5 +1,6 @@
 # Residual stage per measured channel (every measured channel with a truth channel on the same
-# joint): residual against the exact quantizer model, diagnostics, effect selection, before/after.
+# joint): residual against the exact quantizer model, diagnostics, effect selection, before/after,
+# and the angle-error map as a lookup table.
 
 
 rule residuals:
@@ -13,6 +14,9 @@ rule residuals:
         diagnostics="results/{log_id}/residuals/{channel}/diagnostics.png",
         before_after="results/{log_id}/residuals/{channel}/before_after.png",
         covariates="results/{log_id}/residuals/{channel}/covariates.png",
+        # the angle-error map as a controller loads it (docs/residuals.md "Lookup table")
+        lut_csv="results/{log_id}/residuals/{channel}/lookup_table.csv",
+        lut_json="results/{log_id}/residuals/{channel}/lookup_table.json",
     params:
         pair=lambda wc: residual_pair(wc),
         settings=lambda wc: residual_settings(wc),

@@ -48,6 +48,8 @@ __all__ = [
     "rank_covariates",
     "covariates_of",
     "covariate_sentence",
+    "noise_std_variogram",
+    "estimate_floor",
 ]
 
 
@@ -328,7 +330,8 @@ def spectrum(t, r, nperseg: int = 2048) -> dict:
 
 
 def diagnose(t, truth, measured, step: float, truth_step: float | None = None, *,
-             offset: float | None = None, line_pitch_counts: int = 4, n_bins: int = 24) -> dict:
+             offset: float | None = None, line_pitch_counts: int = 4, n_bins: int = 24,
+             noise_std: float = 0.0) -> dict:
     """Every diagnostic of one measured channel against the exact quantizer model.
 
     Parameters
@@ -341,6 +344,9 @@ def diagnose(t, truth, measured, step: float, truth_step: float | None = None, *
         Measured channel offset ``c``; ``None`` fits it (:func:`fit_offset`).
     line_pitch_counts : int
         Counts per line of the code disc (4 for quadrature decoding).
+    noise_std : float
+        The sensor's own noise (rad, :func:`estimate_floor`): it adds its variance to both
+        floors (for the residual approximately: the effect library's floor is exact).
 
     Returns
     -------
@@ -365,7 +371,8 @@ def diagnose(t, truth, measured, step: float, truth_step: float | None = None, *
         "residual": residual,
         "error_moments": moments(error),
         "residual_moments": moments(residual),
-        "floor": {"error_std": error_floor_std(step, truth_step), "residual_std": floor["std"],
+        "floor": {"error_std": math.sqrt(error_floor_std(step, truth_step) ** 2 + noise_std**2),
+                  "residual_std": math.sqrt(floor["std"] ** 2 + noise_std**2),
                   "residual_p_nonzero": floor["p_nonzero"]},
         "histogram": histogram(error, step, truth_step),
         "conditioned": conditioned(t, truth, counts, residual, n_bins=n_bins,
@@ -493,3 +500,92 @@ def covariate_sentence(ranking, min_share: float = 0.1) -> str:
     if more:
         text += "; then " + ", ".join(f"{d['name']} ({100 * d['share']:.0f} %)" for d in more)
     return text
+
+
+def noise_std_variogram(x, max_lag: int = 64, plateau: float = 1.15) -> dict:
+    """Std of the part of ``x`` that decorrelates within ``max_lag`` samples (a sensor's noise).
+
+    The second-difference variogram ``g(k) = mean((x[i+k] - 2 x[i] + x[i-k])^2) / 6`` is the
+    variance of a white noise at every lag, and that of a noise of correlation time ``T`` (a
+    filtered sensor) once ``k >> T``; a smooth part of ``x`` (an angle error, a drift) adds
+    terms growing like ``k^4`` that the second difference keeps small at short lags. ``g`` is
+    evaluated at ``k = 1, 2, 4, ... <= max_lag``; the noise variance is ``g(k)`` at the first lag
+    where doubling the lag changes ``g`` by less than the factor ``plateau`` (the plateau of
+    a decorrelated noise), or at the lag where it changes least when none does (a lower bound
+    for a noise filtered longer than ``max_lag``). Samples whose second difference exceeds
+    8 times the rms are left out once (a level shift or a missed count is no noise).
+
+    Returns
+    -------
+    dict
+        ``std`` (rad), ``lag`` (samples), ``plateau`` (bool: the doubling criterion held).
+    """
+    (x,) = _arrays(x, names=("x",))
+    lags = [k for k in (2 ** np.arange(12)) if 2 * int(k) < x.size // 4 and k <= max_lag]
+    if not lags:
+        return {"std": 0.0, "lag": 0, "plateau": False}
+
+    def g(k):
+        d = x[2 * k:] - 2.0 * x[k:-k] + x[:-2 * k]
+        d2 = d * d
+        rms2 = float(np.mean(d2))
+        if rms2 > 0:
+            d2 = d2[d2 <= 64.0 * rms2]
+        return float(np.mean(d2)) / 6.0 if d2.size else 0.0
+
+    gam = [g(int(k)) for k in lags]
+    best, found = 0, False
+    ratios = []
+    for i in range(len(lags) - 1):
+        ratio = gam[i + 1] / gam[i] if gam[i] > 0 else float("inf")
+        ratios.append(abs(math.log(ratio)) if np.isfinite(ratio) and ratio > 0 else float("inf"))
+        if ratio < plateau and not found:
+            best, found = i, True
+    if not found and ratios:
+        best = int(np.argmin(ratios))
+    return {"std": math.sqrt(max(gam[best], 0.0)), "lag": int(lags[best]), "plateau": bool(found)}
+
+
+def estimate_floor(truth, measured, step: float | None, truth_step: float | None = None, *,
+                   offset: float | None = None, noise_fraction: float = 0.5) -> dict:
+    """What limits the measured channel: its quantization, its noise, or both.
+
+    A grid is the measured channel's step ``step`` (a counts channel, a declared or detected
+    grid; ``None`` when it has none). The noise is :func:`noise_std_variogram` of the error
+    ``measured - truth - offset`` with the quantization's share removed: the variogram of a
+    quantized channel whose noise dithers it holds ``(step^2 + truth_step^2) / 12`` besides the
+    noise; a hard quantizer on a slow motion holds less (its error is a sawtooth in the angle,
+    not white), so what is left is no larger than the noise. The noise is present when its std is
+    above ``noise_fraction`` of the quantization's own std ``step / sqrt(12)`` (below it the
+    readings are a hard quantizer's, flickering at the transitions); any noise counts on a
+    channel without a grid, and a grid whose quantization std is below ``noise_fraction`` of the
+    noise's leaves the kind ``noise`` (the grid is then finer than the noise resolves).
+
+    Returns
+    -------
+    dict
+        ``kind`` (``quantization``, ``noise`` or ``both``), ``step`` (the grid, or None),
+        ``noise_std`` (rad, 0 when not present), ``noise_lag`` (samples at which the variogram
+        was read), ``quantization_std`` (``step / sqrt(12)``, 0 without a grid) and ``std``
+        (the floor of the error ``measured - truth``: both combined with the truth's own
+        quantization).
+    """
+    truth, measured = _arrays(truth, measured, names=("truth", "measured"))
+    step = _step("step", step, allow_none=True)
+    ts = _step("truth_step", truth_step, allow_none=True) or 0.0
+    if offset is None:
+        offset = fit_offset(truth, measured, step)
+    vg = noise_std_variogram(measured - truth - offset)
+    q_var = (step**2 if step else 0.0) / 12.0
+    noise_var = max(vg["std"] ** 2 - q_var - ts * ts / 12.0, 0.0)
+    noise = math.sqrt(noise_var)
+    if step is None:
+        kind = "noise"
+    elif noise <= noise_fraction * math.sqrt(q_var):
+        kind, noise = "quantization", 0.0
+    elif math.sqrt(q_var) < noise_fraction * noise:
+        kind = "noise"
+    else:
+        kind = "both"
+    return {"kind": kind, "step": step, "noise_std": noise, "noise_lag": vg["lag"],
+            "quantization_std": math.sqrt(q_var), "std": math.sqrt(q_var + noise * noise + ts * ts / 12.0)}

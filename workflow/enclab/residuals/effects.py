@@ -44,6 +44,7 @@ __all__ = [
     "Hysteresis",
     "Backlash",
     "AngleHarmonics",
+    "HarmonicMap",
     "LinePitchHarmonics",
     "QuadratureEdges",
     "Latency",
@@ -53,6 +54,7 @@ __all__ = [
     "SofteningCompliance",
     "CalibrationMap",
     "SlowDrift",
+    "LevelShift",
     "MissedCounts",
     "WrapAround",
     "EFFECTS",
@@ -177,6 +179,9 @@ class Effect:
     additive = False
     order = 50
     boundary: tuple = ()
+    #: The effect is an error of the measured angle (a calibration a controller's lookup table
+    #: holds, :mod:`enclab.residuals.lookup_table`); the others are fitted beside such a table.
+    angle_map = False
 
     def applicable(self, ctx) -> bool:
         """Whether the effect can be fitted with the data in ``ctx`` (default: yes)."""
@@ -359,6 +364,7 @@ class AngleHarmonics(Effect):
     name = "angle_harmonics"
     param_names = ("a1", "b1", "a2", "b2")
     order = 20
+    angle_map = True
 
     separated_by = _FULL_TURN
 
@@ -388,6 +394,87 @@ class AngleHarmonics(Effect):
             "amp2": math.hypot(params["a2"], params["b2"]),
             "phase2": math.atan2(params["a2"], params["b2"]),
         }
+
+
+class HarmonicMap(Effect):
+    """Angle error of the measured side as harmonics ``1 .. K`` of the angle, ``K`` chosen on
+    held-out data: the calibration form of interpolating magnetic encoders and resolvers.
+
+    ``theta_eff = theta + sum_k a_k cos(k theta) + b_k sin(k theta)`` (rad), on the smooth angle.
+    :meth:`prepare` fits the current exact-model residual with each order ``1 .. max_order`` on
+    every other of ``n_blocks`` time blocks, scores it on the blocks between (both ways), and
+    takes the order with the smallest held-out error; the map is not tried when that order is
+    below 3 (the once- and twice-per-turn terms are :class:`AngleHarmonics`) or the motion does
+    not cover a full turn (a periodic map is then no calibration; :class:`CalibrationMap` maps a
+    partial stroke). Signature: a residual periodic in the angle with three or more cycles per
+    turn beside the first two. Derived: ``order`` and ``amp1 .. ampK`` (rad).
+    """
+
+    name = "harmonic_map"
+    additive = True
+    order = 20
+    angle_map = True
+    max_order = 8
+    n_blocks = 40
+    heldout_interleave = 10
+
+    separated_by = _FULL_TURN
+
+    def __init__(self):
+        self.param_names = ()
+        self.n_harmonics = 0
+
+    def applicable(self, ctx) -> bool:
+        return float(np.ptp(ctx.truth)) >= 2.0 * np.pi
+
+    @staticmethod
+    def design(a, order: int) -> np.ndarray:
+        """``[cos a, sin a, ..., cos Ka, sin Ka]`` (N, 2K)."""
+        a = np.asarray(a, dtype=float)
+        return np.column_stack([f(k * a) for k in range(1, order + 1) for f in (np.cos, np.sin)])
+
+    def prepare(self, ctx, resid) -> bool:
+        idx = ctx.fit_idx
+        a = (ctx.priv["_smooth"] if "_smooth" in ctx.priv else ctx.truth)[idx]
+        y = np.asarray(resid, dtype=float)[idx]
+        blocks = run_blocks(ctx.truth[idx], self.n_blocks)
+        halves = (np.concatenate(blocks[0::2]), np.concatenate(blocks[1::2]))
+        full = np.column_stack([np.ones(a.size), self.design(a, self.max_order)])
+        errs = []
+        for k in range(0, self.max_order + 1):
+            D = full[:, :1 + 2 * k]
+            err = 0.0
+            for fit, test in (halves, halves[::-1]):
+                coef, *_ = np.linalg.lstsq(D[fit], y[fit], rcond=None)
+                err += float(np.sum((y[test] - D[test] @ coef) ** 2))
+            errs.append(err)
+        best = int(np.argmin(errs))
+        if best < 3:
+            return False
+        self.n_harmonics = best
+        self.param_names = tuple(f"{c}{k}" for k in range(1, best + 1) for c in ("a", "b"))
+        self._cache = None
+        return True
+
+    def _design(self, aux):
+        a = aux["_smooth"]
+        cached = getattr(self, "_cache", None)
+        if cached is None or cached[0] is not a or cached[1] != self.n_harmonics:
+            self._cache = (a, self.n_harmonics, self.design(a, self.n_harmonics))
+        return self._cache[2]
+
+    def columns(self, aux):
+        """``d theta_eff / d (a1, b1, ...)``: the harmonics at the smooth angle."""
+        return self._design(aux).T
+
+    def apply(self, theta, t, velocity, aux, params):
+        return theta + self._design(aux) @ np.asarray(params, dtype=float)
+
+    def derived(self, params):
+        out = {"order": float(self.n_harmonics)}
+        for k in range(1, self.n_harmonics + 1):
+            out[f"amp{k}"] = math.hypot(params.get(f"a{k}", 0.0), params.get(f"b{k}", 0.0))
+        return out
 
 
 class LinePitchHarmonics(Effect):
@@ -534,6 +621,7 @@ class ScaleMismatch(Effect):
     name = "scale_mismatch"
     param_names = ("g",)
     order = 21
+    angle_map = True
 
     separated_by = _FULL_TURN
 
@@ -663,6 +751,7 @@ class CalibrationMap(Effect):
     name = "calibration_map"
     additive = True
     order = 22
+    angle_map = True
     divisions = tuple(range(3, 25))
     min_spacing = 0.02
     min_stroke = 0.2
@@ -816,6 +905,140 @@ class SlowDrift(Effect):
         duration = getattr(self, "duration", float("nan"))
         out["mean_rate"] = 2.0 * (c1 + c3) / duration if duration > 0 else float("nan")
         return out
+
+
+class LevelShift(Effect):
+    """A change of the reading's offset by ``d`` (rad, any size, not a whole number of steps).
+
+    A torque reversal that takes up a preload, a coupling that slips: the measured side reads
+    ``d`` more from some moment on. Two forms, chosen on the log by :meth:`prepare`:
+
+    ``time``
+        one shift at an unknown time ``t_shift``: ``theta_eff = theta + d [t >= t_shift]``; the
+        time is the split of the current exact-model residual into two levels with the smallest
+        sum of squares (at least ``min_fraction`` of the log on either side);
+    ``sign changes``
+        when a torque or command column is declared (``aux`` key in :attr:`drivers`), a shift at
+        each of its sign changes: ``theta_eff = theta + (d / 2) (s - mean s)`` with ``s`` the
+        sign of the column, held through a dead zone of 5 % of its largest magnitude (a torque
+        that chatters about zero does not toggle the preload). With one reversal in the log it
+        is the ``time`` form at the reversal; it is taken when it reads the residual within the
+        cost of one parameter (``ln N`` in the sum of squares over the noise variance) of the
+        best free time.
+
+    ``d`` is the only continuous parameter. The free time is a searched parameter: the search
+    declines (the effect is not tried) unless its split gains more than that parameter's BIC
+    cost, ``ln N`` noise variances, over no shift, and when the best split lies on the edge of
+    the searched range (a transient at the log's start or end). A shift within 0.1 step of a non-zero whole
+    number of steps on a channel without sensor noise is a missed count
+    (:class:`MissedCounts`), not a level shift. Derived: ``t_shift`` (s, the time, or the first
+    sign change), ``t_lo``, ``t_hi`` (the times whose split is within the 90 % chi2_1 profile
+    of the best, residual samples taken as independent: a lower bound of the width),
+    ``at_sign_changes`` (1 for the second form) and ``n_shifts``. Signature: the residual
+    ``measured - truth`` steps by ``d`` at one moment (or at every reversal of the torque) and
+    keeps its level, at every angle and speed.
+    """
+
+    name = "level_shift"
+    additive = True
+    param_names = ("d",)
+    order = 24
+    drivers = ("torque", "command", "current")
+    min_fraction = 0.05
+
+    separated_by = "passes over the same angles before and after the shift"
+
+    def __init__(self):
+        self.t_shift = None
+        self.driver = None
+        self.interval = (float("nan"), float("nan"))
+        self.n_shifts = 0
+
+    def applicable(self, ctx) -> bool:
+        return ctx.t.size >= 4.0 / self.min_fraction
+
+    @classmethod
+    def driver_sign(cls, x) -> np.ndarray:
+        """Sign of a torque or command column held through a dead zone of 5 % of its peak."""
+        x = np.asarray(x, dtype=float)
+        eps = 0.05 * float(np.max(np.abs(x))) if x.size else 0.0
+        s = motion_sign(np.where(np.abs(x) > eps, x, 0.0))
+        first = np.flatnonzero(s)
+        if first.size:  # before the column first leaves the dead zone: the sign it leaves with
+            s[:first[0]] = s[first[0]]
+        return s
+
+    def _driver(self, ctx):
+        for key in self.drivers:
+            if ctx.aux and ctx.aux.get(key) is not None:
+                s = self.driver_sign(ctx.aux[key])
+                if np.any(s[1:] != s[:-1]) and np.all(s != 0):
+                    return key, s
+        return None, None
+
+    def prepare(self, ctx, resid) -> bool:
+        """Find the time (or take the sign changes) from ``resid`` (rad, the exact-model residual
+        of the current model); False when no split earns its cost or it is a missed count."""
+        idx = ctx.fit_idx
+        y = np.asarray(resid, dtype=float)[idx]
+        t = ctx.t[idx]
+        n = y.size
+        y = y - y.mean()
+        ss0 = float(np.sum(y * y))
+        m = max(int(self.min_fraction * n), 2)
+        cs = np.cumsum(y)[:-1]
+        i = np.arange(1, n)
+        # sum of squares removed by two levels split before sample i
+        gain = cs * cs * n / (i * (n - i))
+        gain[:m - 1] = -np.inf
+        gain[n - m:] = -np.inf
+        k = int(np.argmax(gain))
+        if not np.isfinite(gain[k]) or k in (m - 1, n - m - 1):
+            # a best split on the edge of the searched range would sit nearer the log's start or
+            # end: a transient there (a motion that starts late, a settling sensor), no shift
+            return False
+        sse = ss0 - float(gain[k])
+        var = max(sse / max(n - 2, 1), 1e-300)
+        if gain[k] / var <= math.log(n):
+            return False
+        split = k + 1
+        d = float(np.mean(y[split:]) - np.mean(y[:split]))
+        sensor = float(ctx.priv.get("_sensor_var", 0.0)) > (0.25 * ctx.step) ** 2
+        whole = round(d / ctx.step)
+        if not sensor and whole != 0 and abs(d / ctx.step - whole) < 0.1:
+            return False
+        ok = np.flatnonzero(gain >= gain[k] - 2.706 * var) + 1
+        self.t_shift = 0.5 * float(t[split - 1] + t[split])
+        self.interval = (float(t[ok.min() - 1]), float(t[ok.max()]))
+        self.driver, self.n_shifts = None, 1
+        key, s = self._driver(ctx)
+        if key is not None:
+            z = s[idx] - s[idx].mean()
+            zz = float(np.dot(z, z))
+            sse_sign = ss0 - float(np.dot(z, y)) ** 2 / zz if zz > 0 else ss0
+            if (sse_sign - sse) / var < math.log(n):
+                changes = np.flatnonzero(s[1:] != s[:-1]) + 1
+                self.driver, self.n_shifts = key, int(changes.size)
+                self.t_shift = float(ctx.t[changes[0]])
+                self.interval = (float(ctx.t[changes[0] - 1]), float(ctx.t[changes[0]]))
+        return True
+
+    def column(self, t, aux) -> np.ndarray:
+        """``d theta_eff / d d``: the step at ``t_shift`` or the half sign of the driver."""
+        if self.driver is not None:
+            s = self.driver_sign(aux[self.driver])
+            return 0.5 * (s - s.mean())
+        return (np.asarray(t, dtype=float) >= self.t_shift).astype(float)
+
+    def apply(self, theta, t, velocity, aux, params):
+        if self.t_shift is None:
+            return theta
+        return theta + float(params[0]) * self.column(t, aux)
+
+    def derived(self, params):
+        return {"t_shift": float("nan") if self.t_shift is None else float(self.t_shift),
+                "t_lo": self.interval[0], "t_hi": self.interval[1],
+                "at_sign_changes": float(self.driver is not None), "n_shifts": float(self.n_shifts)}
 
 
 class MissedCounts(Effect):
@@ -1023,10 +1246,12 @@ EFFECTS = (
     SofteningCompliance,
     ScaleMismatch,
     AngleHarmonics,
+    HarmonicMap,
     CalibrationMap,
     Latency,
     TimestampJitter,
     SlowDrift,
+    LevelShift,
     LinePitchHarmonics,
     QuadratureEdges,
     MissedCounts,

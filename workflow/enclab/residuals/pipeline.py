@@ -25,17 +25,24 @@ Settings (``config["residuals"]`` updated with the log's ``analysis.residuals``)
 ``seed``
     Root seed; each channel gets ``[seed, crc32(log_id/channel)]``.
 ``step``
-    The measured channel's step (rad), only for a float channel without a detected grid.
+    The measured channel's grid (rad) for a float channel whose grid is not detected.
+``floor_fraction``
+    A floor component (quantization, noise) is present when its std is at least this fraction
+    of the other's (:func:`enclab.residuals.diagnostics.estimate_floor`).
+``lut_entries``, ``map_max_order``
+    Entries of the lookup table over one revolution and the highest harmonic of the angle map
+    (:mod:`enclab.residuals.lookup_table`).
 """
 from __future__ import annotations
 
+import math
 import zlib
 from collections.abc import Callable, Mapping
 
 import numpy as np
 import pandas as pd
 
-__all__ = ["residual_pairs", "channel_values", "analyse_channel", "before_after_table", "format_effects",
+__all__ = ["residual_pairs", "channel_values", "sensor_floor", "channel_angle_map", "analyse_channel", "before_after_table", "format_effects",
            "indistinguishable_label", "verdict", "summary_block", "batch_rows"]
 
 METRIC = "std of (measured - exact-model prediction) [rad]"
@@ -76,7 +83,8 @@ def _selector() -> Callable:
 
 def _settings(settings: Mapping | None) -> dict:
     out = {"offset": "fit", "line_pitch_counts": 4, "n_bins": 24, "alpha": 0.01, "candidates": None,
-           "distinguish_bic": 10.0, "aux": {}, "seed": 0, "step": None}
+           "distinguish_bic": 10.0, "aux": {}, "seed": 0, "step": None, "floor_fraction": 0.5,
+           "lut_entries": 256, "map_max_order": 8}
     unknown = set(settings or {}) - set(out)
     if unknown:
         raise ValueError(f"residuals settings: unknown key(s) {sorted(unknown)}; expected {sorted(out)}")
@@ -161,6 +169,96 @@ def check_memory(n_samples: int, meta: Mapping) -> None:
             "run of its own.")
 
 
+def sensor_floor(truth, measured, step, truth_step, *, declared_step=None, offset=None,
+                 floor_fraction: float = 0.5, where: str = "") -> tuple[dict, float, float | None, np.ndarray]:
+    """What limits the measured channel, and the grid the effect library analyses it on.
+
+    The channel's grid is its counts step, else ``declared_step``, else the grid its values sit
+    on (:func:`enclab.residuals.select.estimate_grid_step`), else none. A float truth's grid is
+    found the same way (a grid coarser than the measured one is a coincidence of the motion,
+    not a truth grid, and is ignored); two grids within 0.1 % of each other are one grid
+    (one 1/32-unit grid written with a few digits). The floor is
+    :func:`enclab.residuals.diagnostics.estimate_floor`. The analysis grid is the channel's own
+    where quantization is present; where noise dominates it is the coarsest multiple of the
+    channel's grid (or, without one, the step) at most a quarter of the noise std and not finer
+    than the truth's grid, and the readings are rounded to it: the library's count likelihood
+    then sees the noise as a jitter of four counts or more, and rounding adds at most
+    ``1/192`` of the noise variance.
+
+    Returns
+    -------
+    floor : dict
+        :func:`~enclab.residuals.diagnostics.estimate_floor` plus ``analysis_step``.
+    step : float
+        The analysis grid (rad).
+    truth_step : float or None
+    measured : ndarray
+        The readings on the analysis grid.
+
+    Raises
+    ------
+    ValueError
+        When the truth's grid is coarser than the measured channel's (``where`` names them).
+    """
+    from enclab.residuals import diagnostics as dg
+    from enclab.residuals.select import estimate_grid_step
+
+    grid = step if step is not None else (float(declared_step) if declared_step is not None else None)
+    if grid is None:
+        est = estimate_grid_step(measured)
+        grid = est if est > 0 else None
+    if truth_step is None:
+        est = estimate_grid_step(truth)
+        truth_step = est if est > 0 and (grid is None or est <= grid * (1.0 + 1e-3)) else None
+    if grid is not None and truth_step is not None and truth_step > grid:
+        if truth_step > grid * (1.0 + 1e-3):
+            raise ValueError(f"{where}: the truth's grid ({truth_step:.6g} rad) is coarser than the measured "
+                             f"channel's ({grid:.6g} rad); the finer channel must be the truth")
+        truth_step = grid
+    floor = dg.estimate_floor(truth, measured, grid, truth_step, offset=offset, noise_fraction=floor_fraction)
+    noise = floor["noise_std"]
+    fine = max(0.25 * noise, truth_step or 0.0)
+    if grid is not None and floor["kind"] != "noise":
+        step_a = grid
+    elif grid is not None:
+        step_a = grid * max(1.0, math.floor(fine / grid))
+    else:
+        spread = float(np.std(np.asarray(measured, float) - np.asarray(truth, float)))
+        step_a = fine if fine > 0 else max(0.25 * spread, 1e-12)
+    if step_a != grid:
+        measured = step_a * np.round(np.asarray(measured, float) / step_a)
+    floor["analysis_step"] = float(step_a)
+    return floor, float(step_a), truth_step, np.asarray(measured, float)
+
+
+def channel_angle_map(t, measured, truth, offset, res, *, step=None, n_entries=256, max_order=8) -> dict:
+    """:func:`enclab.residuals.lookup_table.angle_map` of one channel: the error
+    ``measured - truth - offset`` against the measured angle, beside the shift of the angle that
+    the chosen effects other than angle maps make (a level shift, a compliance, a play, a
+    drift: their joint shift as one column with a free coefficient), so that the map is not bent
+    by them. The effects marked ``angle_map`` (harmonics, a calibration map, a scale) are what
+    the table holds and are left to it."""
+    from enclab.residuals import lookup_table
+
+    nuisance = None
+    fitted, ctx = getattr(res, "_fitted", None), getattr(res, "_ctx", None)
+    if fitted is not None and ctx is not None:
+        x = np.array(fitted.x, dtype=float)
+        others = False
+        for e, sl in zip(fitted.model.effects, fitted.model.slices):
+            if getattr(e, "angle_map", False):
+                x[sl] = e.null()
+            else:
+                others = True
+        if others:
+            mu, _ = fitted.model.forward(ctx, x)
+            shift = (mu - x[0]) * ctx.step - ctx.truth
+            if float(np.ptp(shift)) > 0:
+                nuisance = shift[:, None]
+    measured = np.asarray(measured, float)
+    return lookup_table.angle_map(measured, measured - np.asarray(truth, float) - offset, n_entries=n_entries,
+                                  max_order=max_order, nuisance=nuisance, step=step)
+
 def analyse_channel(df: pd.DataFrame, meta: Mapping, pair: Mapping, settings: Mapping | None = None,
                     selector: Callable | None = None) -> tuple[dict, dict, pd.DataFrame]:
     """Residual of one measured channel against the exact model, before and after the effects.
@@ -191,12 +289,12 @@ def analyse_channel(df: pd.DataFrame, meta: Mapping, pair: Mapping, settings: Ma
     Raises
     ------
     ValueError
-        When the measured channel has no quantization step (a float channel without a grid and
-        no ``step`` setting), or the settings are unknown.
+        When the truth channel's grid is coarser than the measured channel's, or the settings
+        are unknown.
     """
     # Imported here: common.smk imports this module for residual_pairs on every DAG build.
     from enclab.residuals import diagnostics as dg
-    from enclab.residuals import plots
+    from enclab.residuals import lookup_table, plots
 
     cfg = _settings(settings)
     log_id = meta.get("log_id", "?")
@@ -204,41 +302,32 @@ def analyse_channel(df: pd.DataFrame, meta: Mapping, pair: Mapping, settings: Ma
     t = df["t"].to_numpy(dtype=np.float64)
     truth, truth_step = channel_values(df, meta, pair["truth"])
     measured, step = channel_values(df, meta, pair["measured"])
-    if step is None:
-        if cfg["step"] is None:
-            raise ValueError(
-                f"log {log_id!r}: measured channel {pair['measured']!r} has no quantization step "
-                "(a float channel without a detected grid); declare native_step in the manifest "
-                "or analysis.residuals.step")
-        step = float(cfg["step"])
-    if truth_step is None:
-        # a float truth channel: the grid it is on, if any (the exact-model floor needs it; a
-        # grid coarser than the measured step is no truth grid but a coincidence of the motion)
-        from enclab.residuals.select import estimate_grid_step
-
-        est = estimate_grid_step(truth)
-        truth_step = est if 0.0 < est <= step else None
-    if truth_step is not None and truth_step > step:
-        raise ValueError(f"log {log_id!r}: truth channel {pair['truth']!r} (step {truth_step:.6g} rad) "
-                         f"is coarser than measured channel {pair['measured']!r} (step {step:.6g} rad)")
+    floor, step_a, truth_step, measured_a = sensor_floor(
+        truth, measured, step, truth_step, declared_step=cfg["step"],
+        offset=None if cfg["offset"] == "fit" else float(cfg["offset"]),
+        floor_fraction=float(cfg["floor_fraction"]), where=f"log {log_id!r}: measured channel "
+        f"{pair['measured']!r} against truth channel {pair['truth']!r}")
     offset = None if cfg["offset"] == "fit" else float(cfg["offset"])
-    diag = dg.diagnose(t, truth, measured, step, truth_step, offset=offset,
-                       line_pitch_counts=int(cfg["line_pitch_counts"]), n_bins=int(cfg["n_bins"]))
+    diag = dg.diagnose(t, truth, measured_a, step_a, truth_step, offset=offset,
+                       line_pitch_counts=int(cfg["line_pitch_counts"]), n_bins=int(cfg["n_bins"]),
+                       noise_std=floor["noise_std"])
     offset = diag["offset"]
     aux = {key: channel_values(df, meta, name)[0] for key, name in (cfg["aux"] or {}).items()}
     seed = [int(cfg["seed"]), zlib.crc32(f"{log_id}/{pair['measured']}".encode())]
     select = selector or _selector()
+    # a sensor's own noise is part of the exact model, like the truth's quantization
+    extra = {"noise_std": floor["noise_std"]} if floor["noise_std"] > 0 else {}
     # The offset is part of the exact model, not an effect: the library sees truth + c, so a
     # counter's unknown zero never competes with the physical candidates.
-    res = select(t, truth + offset, measured, step, truth_step=truth_step, aux=aux or None,
+    res = select(t, truth + offset, measured_a, step_a, truth_step=truth_step, aux=aux or None,
                  seed=int(np.random.SeedSequence(seed).generate_state(1)[0]),
                  candidates=cfg["candidates"], alpha=float(cfg["alpha"]),
                  distinguish_bic=float(cfg["distinguish_bic"]),
-                 line_pitch=int(cfg["line_pitch_counts"]) * step)
+                 line_pitch=int(cfg["line_pitch_counts"]) * step_a, **extra)
     # On the log the selection ran on (its truth, aux channels and counts, so that effects
     # needing the torque or the measured counts are included).
     after_pred = np.asarray(res.model_prediction(), dtype=np.float64)
-    r_after = measured - after_pred
+    r_after = measured_a - after_pred
     v = dg.velocity(t, truth)
     after_diag = {"residual": dg.moments(r_after), "velocity_sign": dg.velocity_sign(v, r_after)}
     selection = dict(res.to_summary())
@@ -254,10 +343,15 @@ def analyse_channel(df: pd.DataFrame, meta: Mapping, pair: Mapping, settings: Ma
         message = f"{message}; {outside}"
     selection.update(explained=bool(res.explained), message=message, covariates=ranking,
                      outside_catalogue=outside)
+    amap = channel_angle_map(t, measured, truth, offset, res, step=floor["step"],
+                             n_entries=int(cfg["lut_entries"]), max_order=int(cfg["map_max_order"]))
     block = {
         "log_id": log_id, "measured": pair["measured"], "truth": pair["truth"],
-        "step": step, "truth_step": truth_step, "offset": offset,
-        "offset_steps": offset / step,
+        "step": step_a, "truth_step": truth_step, "offset": offset,
+        "offset_steps": offset / step_a,
+        "floor_kind": floor["kind"], "floor": floor,
+        "angle_map": {k: v for k, v in amap.items() if k != "entries"},
+        "lookup_table": lookup_table.table_document(amap, channel=pair["measured"], log_id=log_id, floor=floor),
         "convention": "residual = measured - q(truth + offset), q rounds to the measured grid; "
                       "error = measured - truth - offset; rad",
         "before": dg.scalar_summary(diag),
@@ -266,13 +360,13 @@ def analyse_channel(df: pd.DataFrame, meta: Mapping, pair: Mapping, settings: Ma
     }
     title = f"{log_id}: {pair['measured']} vs {pair['truth']}"
     figures = {
-        "diagnostics": plots.diagnostics_figure(t, truth, diag, step, title=title),
-        "before_after": plots.before_after_figure(t, truth, measured, diag["prediction"], after_pred,
-                                                  step, title=title,
+        "diagnostics": plots.diagnostics_figure(t, truth, diag, step_a, title=title),
+        "before_after": plots.before_after_figure(t, truth, measured_a, diag["prediction"], after_pred,
+                                                  step_a, title=title,
                                                   effects_label=_effects_label(res.effects)),
-        "covariates": plots.covariates_figure(r_after, covariates, ranking, step, title=title),
+        "covariates": plots.covariates_figure(r_after, covariates, ranking, step_a, title=title),
     }
-    table = before_after_table(log_id, pair, step, diag, r_after, res.before, res.after,
+    table = before_after_table(log_id, pair, step_a, diag, r_after, res.before, res.after,
                                selection["effects"], explained=bool(res.explained))
     return block, figures, table
 
@@ -318,6 +412,9 @@ def summary_block(blocks: list[Mapping]) -> dict | None:
         sel = dict(b["selection"])
         sel.update(measured=b["measured"], truth=b["truth"], step=b["step"],
                    truth_step=b["truth_step"], offset=b["offset"])
+        if "floor_kind" in b:
+            sel.update(floor_kind=b["floor_kind"], floor=b.get("floor"), angle_map=b.get("angle_map"),
+                       lookup_table=(b.get("lookup_table") or {}).get("files"))
         sel.setdefault("metric", METRIC)
         per[b["measured"]] = sel
     first = per[blocks[0]["measured"]]
@@ -338,6 +435,9 @@ def batch_rows(summary: Mapping) -> list[dict]:
         rows.append({
             "log_id": summary["log_id"], "measured": name, "truth": sel.get("truth"),
             "step": sel.get("step"), "truth_step": sel.get("truth_step"), "offset": sel.get("offset"),
+            "floor_kind": sel.get("floor_kind"),
+            "map_order": (sel.get("angle_map") or {}).get("order"),
+            "map_heldout_rms": (sel.get("angle_map") or {}).get("heldout_rms_table"),
             "before_std": before.get("std"), "after_std": after.get("std"), "floor_std": floor,
             "after_over_floor": ratio,
             "explained": sel.get("explained"),

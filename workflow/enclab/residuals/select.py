@@ -224,7 +224,7 @@ class _Model:
         aux = {**ctx.aux, **priv}
         theta = ctx.truth
         # s is the Gaussian part only; the truth channel's uniform error enters _loglik_terms
-        var = np.full(ctx.n, (10.0 ** x[1]) ** 2)
+        var = np.full(ctx.n, (10.0 ** x[1]) ** 2 + ctx.priv.get("_sensor_var", 0.0) / ctx.step**2)
         for e, sl in zip(self.effects, self.slices):
             p = x[sl]
             if e.kind == "noise":
@@ -254,7 +254,7 @@ class _Model:
     def noise_var(self, ctx, x):
         """Angle variance (rad^2) of the noise effects alone (no nuisance jitter)."""
         aux = {**ctx.aux, **ctx.priv, "_offset": x[0]}
-        var = np.zeros(ctx.n)
+        var = np.full(ctx.n, ctx.priv.get("_sensor_var", 0.0))
         for e, sl in zip(self.effects, self.slices):
             if e.kind == "noise":
                 var = var + e.noise_std(ctx.truth, ctx.t, ctx.velocity, aux, x[sl]) ** 2
@@ -1058,6 +1058,7 @@ def select_effects(
     line_pitch: float | None = None,
     stop_at_floor: bool = True,
     distinguish_bic: float | None = None,
+    noise_std: float = 0.0,
 ) -> SelectionResult:
     """Find, fit and report the effects that explain ``measured`` against ``truth``.
 
@@ -1095,6 +1096,10 @@ def select_effects(
     distinguish_bic : float or None
         Margin of the swap-in ``delta_bic`` below which an alternative is reported as not
         distinguishable from a chosen effect (module notes); None takes ``bic_threshold``.
+    noise_std : float
+        White noise of the measured sensor (rad) known from elsewhere
+        (:func:`enclab.residuals.diagnostics.estimate_floor`): part of the exact model, like the
+        truth's quantization, it enters every model's jitter and the floor.
 
     Returns
     -------
@@ -1120,6 +1125,7 @@ def select_effects(
         truth_step = estimate_grid_step(truth)
     grid, counts = _grid_and_counts(measured, step)
     full = _make_ctx(t, truth, counts, step, float(truth_step), aux, grid, line_pitch)
+    full.priv["_sensor_var"] = float(noise_std) ** 2
     # Long logs are fitted on every k-th sample (at most _MAX_FIT_SAMPLES): the fits, the
     # criterion and the intervals use the subsample, the before/after statistics the full log.
     every = max(1, math.ceil(t.size / _MAX_FIT_SAMPLES))

@@ -8,13 +8,14 @@ continuous angle.
 """
 from __future__ import annotations
 
+import math
 
 import numpy as np
 from scipy.interpolate import CubicSpline
 
 from enclab.residuals import effects as fx
 
-__all__ = ["random_motion", "random_torque", "random_map", "simulate_log"]
+__all__ = ["random_motion", "random_torque", "random_map", "simulate_log", "SENSORS", "simulate_sensor", "sensor_canonical"]
 
 
 def random_motion(rng: np.random.Generator, kind: str, duration: float, amplitude: float, centre: float = 0.0):
@@ -103,7 +104,9 @@ def simulate_log(
     (``k1 T + k2 T|T|``; both need ``torque``, the true torque, which the effect follows),
     ``calibration_map {knots, values}`` (a not-a-knot cubic spline through ``values`` at the
     angles ``knots``, held at its end values outside them), ``slow_drift {rate, quad}``
-    (``rate (t - t_mid) + quad (t - t_mid)^2``, rad/s and rad/s^2), ``missed_counts {times,
+    (``rate (t - t_mid) + quad (t - t_mid)^2``, rad/s and rad/s^2), ``level_shift {time, size}``
+    (the reading ``size`` rad higher from ``time`` on) or ``level_shift {torque, size}`` (half of
+    ``size`` times the sign of the given torque array), ``missed_counts {times,
     jumps}``, ``wrap_around {period}``.
 
     Returns
@@ -154,6 +157,13 @@ def simulate_log(
         p = effects["slow_drift"]
         tm = t - 0.5 * (t[0] + t[-1])
         te = te + p.get("rate", 0.0) * tm + p.get("quad", 0.0) * tm**2
+    if "level_shift" in effects:
+        p = effects["level_shift"]
+        if "torque" in p:  # a preload taken up at every reversal of the torque
+            tq = np.asarray(p["torque"], dtype=float)
+            te = te + 0.5 * p["size"] * np.sign(tq)
+        else:
+            te = te + p["size"] * (t >= p["time"])
     counts = np.floor(te / step + c).astype(np.int64)
     if "quadrature_edges" in effects:
         p = effects["quadrature_edges"]
@@ -175,3 +185,118 @@ def simulate_log(
         measured = step * np.round(measured / step)
         counts = np.round(measured / step).astype(np.int64)
     return {"t": t, "theta": theta, "truth": truth, "measured": measured, "counts": counts, "offset_frac": c}
+
+
+#: Sensors that are not hard quantizers, each against a fine reference (:func:`simulate_sensor`).
+#: ``step`` is the sensor's output grid (None: a continuous output), ``noise`` its white noise
+#: std (rad; ``filter`` > 0 makes it a first-order low-pass noise of that pole with the same
+#: std), ``harmonics`` the angle error ``[(k, a_k, b_k)]`` (rad, of the true angle), ``poly``
+#: a nonlinear map ``sum c_j (theta / half_stroke)^j`` (rad), ``motion`` ``turn`` (a shaft
+#: rotating at a varying speed over several turns) or ``swing`` (a sine over ``stroke`` rad).
+SENSORS = {
+    # interpolating magnetic encoder, 14-bit output, 1st-4th harmonic error (eccentricity,
+    # magnet tilt, the sensor's own twice-per-turn error) and noise of about half a count
+    "magnetic": {"step": 2 * np.pi / 2**14, "noise": 2.0e-4, "filter": 0.0, "motion": "turn",
+                 "harmonics": [(1, 2.0e-3, -1.0e-3), (2, 8.0e-4, 6.0e-4), (3, -4.0e-4, 3.0e-4),
+                               (4, 3.0e-4, 2.0e-4)]},
+    # resolver read by a resolver-to-digital converter as a float: twice-per-turn error, noise
+    "resolver": {"step": None, "noise": 6.0e-5, "filter": 0.0, "motion": "turn",
+                 "harmonics": [(2, 1.2e-3, -7.0e-4)]},
+    # potentiometer on a 12-bit ADC over its 300 degree track: a nonlinear track and noise
+    "potentiometer": {"step": np.deg2rad(300.0) / 2**12, "noise": 6.0e-4, "filter": 0.0, "motion": "swing",
+                      "stroke": np.deg2rad(270.0), "poly": [0.0, 0.0, 4.0e-3, 2.5e-3]},
+    # servo: output-side sensor read through an ADC and filtered, against the motor encoder
+    # through the gear, both stored on one 1/32-unit grid; constant torque one way, then the
+    # other (a preload taken up: a level shift halfway)
+    "servo": {"step": 2 * np.pi / 80000, "noise": 2.0e-4, "filter": 0.7, "motion": "turn",
+              "harmonics": [(1, 1.5e-3, 5.0e-4)], "level_shift": 9.0e-4},
+}
+
+
+def simulate_sensor(rng: np.random.Generator, kind: str, *, duration: float = 8.0, fs_hz: float = 1000.0,
+                    truth_step: float | None = None, spec: dict | None = None) -> dict:
+    """One log of a sensor of :data:`SENSORS` (or ``spec``) against a fine reference.
+
+    The true angle follows the sensor's motion; the reference reads it on ``truth_step``
+    (default ``2 pi / 2**20``, a fine encoder; the servo's reference is on the sensor's own
+    grid, the motor encoder through the gear stored on it). The sensor reads the true angle
+    plus its error map and its noise (white, or low-pass filtered to the same std), rounded to
+    its grid when it has one. The servo's torque is +1 then -1 from halfway, and its reading
+    shifts by ``level_shift`` there.
+
+    Returns
+    -------
+    dict
+        ``t``, ``theta``, ``truth``, ``measured`` (rad), ``step``, ``truth_step``, ``noise``,
+        ``error`` (the sensor's error map along the log, rad), ``torque`` (or None),
+        ``floor_std`` (the std the error would have with a perfect map:
+        ``sqrt(noise^2 + step^2 / 12 + truth_step^2 / 12)``) and ``spec``.
+    """
+    if spec is None:
+        if kind not in SENSORS:
+            raise ValueError(f"unknown sensor {kind!r}; known: {sorted(SENSORS)}")
+        spec = SENSORS[kind]
+    n = int(round(duration * fs_hz))
+    t = np.arange(n) / fs_hz
+    if spec["motion"] == "turn":
+        f, a, fv = rng.uniform(0.35, 0.6), rng.uniform(0.5, 1.0), rng.uniform(0.2, 0.5)
+        theta = 2 * np.pi * f * t + a * np.sin(2 * np.pi * fv * t) + rng.uniform(0, 2 * np.pi)
+    else:
+        half = 0.5 * spec["stroke"]
+        f = rng.uniform(0.3, 0.6)
+        theta = half * np.sin(2 * np.pi * f * t + rng.uniform(0, 2 * np.pi))
+    step = spec.get("step")
+    if truth_step is None:
+        truth_step = step if kind == "servo" else 2 * np.pi / 2**20
+    truth = truth_step * np.round(theta / truth_step)
+    err = np.zeros(n)
+    for k, ak, bk in spec.get("harmonics", []):
+        err = err + ak * np.cos(k * theta) + bk * np.sin(k * theta)
+    if spec.get("poly"):
+        x = theta / (0.5 * spec["stroke"])
+        err = err + sum(c * x**j for j, c in enumerate(spec["poly"]))
+    torque = None
+    shift = np.zeros(n)
+    if spec.get("level_shift"):
+        torque = np.where(t < 0.5 * t[-1], 1.0, -1.0)
+        shift = spec["level_shift"] * (torque < 0)
+    noise = rng.normal(0.0, spec["noise"], n)
+    pole = float(spec.get("filter", 0.0))
+    if pole > 0:
+        from scipy.signal import lfilter
+
+        noise = lfilter([math.sqrt(1.0 - pole * pole)], [1.0, -pole], noise)
+    reading = theta + err + shift + noise
+    measured = reading if step is None else step * np.round(reading / step)
+    floor = math.sqrt(spec["noise"] ** 2 + ((step or 0.0) ** 2 + truth_step**2) / 12.0)
+    return {"t": t, "theta": theta, "truth": truth, "measured": measured, "step": step, "truth_step": truth_step,
+            "noise": spec["noise"], "error": err, "torque": torque, "level_shift": shift, "floor_std": floor,
+            "spec": spec}
+
+
+def sensor_canonical(sim: dict, log_id: str = "sensor"):
+    """A :func:`simulate_sensor` log as the canonical log ingest makes of it (truth and, when it
+    has a grid, the sensor as counts; a continuous sensor as float; the servo's torque as a
+    float channel), with its pair and the residual settings that declare the torque.
+
+    Returns
+    -------
+    df, meta, pair, settings
+    """
+    cols = {"t": sim["t"], "truth": np.rint(sim["truth"] / sim["truth_step"]).astype(np.int64)}
+    chans = [{"name": "truth", "role": "truth", "joint": 1, "storage": "counts", "step": sim["truth_step"]}]
+    if sim["step"]:
+        cols["measured"] = np.rint(sim["measured"] / sim["step"]).astype(np.int64)
+        chans.append({"name": "measured", "role": "measured", "joint": 1, "storage": "counts", "step": sim["step"]})
+    else:
+        cols["measured"] = sim["measured"]
+        chans.append({"name": "measured", "role": "measured", "joint": 1, "storage": "float", "step": None})
+    settings = {}
+    if sim.get("torque") is not None:
+        cols["torque"] = sim["torque"]
+        chans.append({"name": "torque", "role": "command", "joint": 1, "storage": "float", "step": None})
+        settings["aux"] = {"torque": "torque"}
+    import pandas as pd
+
+    meta = {"log_id": log_id, "channels": chans}
+    return pd.DataFrame(cols), meta, {"measured": "measured", "truth": "truth"}, settings
