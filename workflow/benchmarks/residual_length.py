@@ -22,8 +22,9 @@ chosen, *correct* when the dead band is (or an alternative reported as not disti
 from it), *worse* when the residual std after the effects is above the one before.
 
 Run in parts (``--lengths``, ``--draws``, ``--shard i/n``); rows are merged into
-``results/benchmarks/residual_length_draws.csv`` by (length, case, draw), the summary
-``results/benchmarks/residual_length.csv`` is rebuilt from every row present.
+``results/benchmarks/residual_length/draws.csv`` by (length, case, draw) (thresholds in
+``thresholds.csv`` beside it), the summary ``results/benchmarks/residual_length.csv`` is
+rebuilt from every row present.
 
 Command (the table in the docs): ``python workflow/benchmarks/residual_length.py --lengths 4000
 40000 --draws 100`` then ``--lengths 400000 4000000 --draws 5``.
@@ -151,6 +152,22 @@ def summarize(draws: pd.DataFrame, thresholds: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def save(out: Path, old: pd.DataFrame, rows: list, thr_old: pd.DataFrame, thr_rows: list) -> pd.DataFrame:
+    """Merge the new draws and thresholds into the CSVs; rebuild and write the summary."""
+    new = stamp(pd.DataFrame(rows)) if rows else pd.DataFrame()
+    draws = pd.concat([old, new], ignore_index=True).drop_duplicates(["length", "case", "draw"], keep="last")
+    draws.to_csv(out / "residual_length" / "draws.csv", index=False)
+    thr_all = pd.concat([thr_old, stamp(pd.DataFrame(thr_rows))] if thr_rows else [thr_old], ignore_index=True)
+    thr_all.to_csv(out / "residual_length" / "thresholds.csv", index=False)
+    summary = summarize(draws, thr_all)
+    # one provenance per summary row: the latest draw of its cell
+    last = draws.sort_values("date").groupby(["length", "case"]).tail(1).set_index(["length", "case"])
+    prov = pd.DataFrame([last.loc[(r.length, r.case), ["date", "machine", "command"]].to_dict()
+                         for r in summary.itertuples()])
+    stamp(pd.concat([prov, summary], axis=1)).to_csv(out / "residual_length.csv", index=False)
+    return summary
+
+
 def parse_shard(text: str) -> tuple[int, int]:
     i, n = (int(v) for v in text.split("/"))
     if not (n >= 1 and 0 <= i < n):
@@ -167,8 +184,8 @@ def main(argv=None) -> int:
     ap.add_argument("--shard", type=parse_shard, default=(0, 1), help="i/n: every n-th draw from the i-th")
     ap.add_argument("--out", type=Path, default=OUT)
     args = ap.parse_args(argv)
-    args.out.mkdir(parents=True, exist_ok=True)
-    draws_path, thr_path = args.out / "residual_length_draws.csv", args.out / "residual_length_thresholds.csv"
+    (args.out / "residual_length").mkdir(parents=True, exist_ok=True)
+    draws_path, thr_path = args.out / "residual_length" / "draws.csv", args.out / "residual_length" / "thresholds.csv"
     old = pd.read_csv(draws_path) if draws_path.exists() else pd.DataFrame()
     thr_old = pd.read_csv(thr_path) if thr_path.exists() else pd.DataFrame(columns=["length"])
     rows, thr_rows = [], []
@@ -188,17 +205,9 @@ def main(argv=None) -> int:
                 print(f"{n} {case} {draw}: {row['effects'] or '-'} worse={row['worse']} "
                       f"heldout {row['heldout_before_std']:.3g}->{row['heldout_after_std']:.3g} "
                       f"{row['cpu_s']:.1f}s", flush=True)
-    new = stamp(pd.DataFrame(rows)) if rows else pd.DataFrame()
-    draws = pd.concat([old, new], ignore_index=True).drop_duplicates(["length", "case", "draw"], keep="last")
-    draws.to_csv(draws_path, index=False)
-    thr_all = pd.concat([thr_old, stamp(pd.DataFrame(thr_rows))] if thr_rows else [thr_old], ignore_index=True)
-    thr_all.to_csv(thr_path, index=False)
-    summary = summarize(draws, thr_all)
-    # one provenance per summary row: the latest draw of its cell
-    last = draws.sort_values("date").groupby(["length", "case"]).tail(1).set_index(["length", "case"])
-    prov = pd.DataFrame([last.loc[(r.length, r.case), ["date", "machine", "command"]].to_dict()
-                         for r in summary.itertuples()])
-    stamp(pd.concat([prov, summary], axis=1)).to_csv(args.out / "residual_length.csv", index=False)
+                if len(rows) % 10 == 0:  # a long run interrupted keeps what it measured
+                    save(args.out, old, rows, thr_old, thr_rows)
+    summary = save(args.out, old, rows, thr_old, thr_rows)
     print(summary.to_string(index=False))
     return 0
 
