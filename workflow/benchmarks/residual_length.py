@@ -183,6 +183,7 @@ def main(argv=None) -> int:
     ap.add_argument("--cases", nargs="+", default=["clean", "hysteresis"], choices=["clean", "hysteresis"])
     ap.add_argument("--shard", type=parse_shard, default=(0, 1), help="i/n: every n-th draw from the i-th")
     ap.add_argument("--out", type=Path, default=OUT)
+    ap.add_argument("--redo", action="store_true", help="rerun draws already in the draws CSV")
     args = ap.parse_args(argv)
     (args.out / "residual_length").mkdir(parents=True, exist_ok=True)
     draws_path, thr_path = args.out / "residual_length" / "draws.csv", args.out / "residual_length" / "thresholds.csv"
@@ -199,7 +200,10 @@ def main(argv=None) -> int:
             print(f"{n}: threshold {thr['threshold_h'] / STEP:.3f} step (practical {thr['practical_h'] / STEP:.3f},"
                   f" evidence {thr['evidence_h'] / STEP:.3f})", flush=True)
         for case in args.cases:
+            done = set(old.loc[(old["length"] == n) & (old["case"] == case), "draw"]) if len(old) else set()
             for draw in range(args.shard[0], args.draws, args.shard[1]):
+                if draw in done and not args.redo:
+                    continue
                 row = run_draw(n, case, draw, 3.0 * float(thr["threshold_h"]))
                 rows.append(row)
                 print(f"{n} {case} {draw}: {row['effects'] or '-'} worse={row['worse']} "
