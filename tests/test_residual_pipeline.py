@@ -122,6 +122,13 @@ def test_summary_block_and_batch_rows(analysed):
     assert "runner-up" in rows[0]["effects"] and rows[0]["indistinguishable"] == ""
     assert [r["verdict"] for r in rows] == ["explained", "explained"]
     assert [r["floor_kind"] for r in rows] == ["quantization", "quantization"]
+    # every in-sample "after" comes with its held-out pair, in the block, the rows and the text
+    for key in ("heldout_before", "heldout_after"):
+        assert block[key]["std"] >= 0 and key in block["channels"]["other"]
+    assert "time blocks" in block["heldout"]["how"]
+    assert rows[0]["heldout_after_std"] < rows[0]["heldout_before_std"]
+    assert rows[1]["heldout_after_std"] == rows[1]["heldout_before_std"]  # no effect: one model
+    assert "held out (" in block["message"] and block["transients"] == []
 
 
 def test_report_text_spells_out_indistinguishable_and_unexplained():

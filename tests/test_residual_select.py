@@ -173,7 +173,9 @@ def test_backward_check_drops_an_effect_that_a_later_one_made_redundant():
     # their own threshold), its draws replayed as challenge_residuals._make_log makes them.
     # Forward selection takes a scale mismatch first, then the harmonic, whose once-per-turn
     # term also carries the slope; refitted without the scale the final model loses less than
-    # the criterion, so the scale goes.
+    # the criterion, so the scale goes. The harmonic's step-2 addition moves the angle by less
+    # than the default practical size (the scale already carries most of it): the practical
+    # size is switched off here so the backward check itself is what is tested.
     rng = np.random.default_rng(3580810742)
     duration = float(rng.uniform(10.0, 15.0))
     kind = str(rng.choice(["sine", "multisine", "smooth"]))
@@ -187,7 +189,7 @@ def test_backward_check_drops_an_effect_that_a_later_one_made_redundant():
     log = simulate_log(rng, motion, duration=duration, step=STEP, truth_step=TRUTH_STEP,
                        effects={"angle_harmonics": eff})
     res = select_effects(log["t"], log["truth"], log["measured"], STEP, truth_step=TRUTH_STEP,
-                         line_pitch=16 * STEP)
+                         line_pitch=16 * STEP, min_effect_floor_fraction=0.0)
     picked = [r["effect"] for r in res.steps if r.get("delta_heldout", -1.0) > 0]
     assert picked == ["scale_mismatch", "angle_harmonics"]
     (dropped,) = [r for r in res.steps if r["step"] == "backward"]
@@ -428,3 +430,117 @@ def test_floor_interval_counts_a_repeated_pass_once():
     assert out[3]["std"] == pytest.approx(out[1]["std"], rel=2e-3)
     half_width = {k: out[k]["floor_limit"] ** 2 - out[k]["floor_std"] ** 2 for k in (1, 3)}
     assert half_width[3] == pytest.approx(half_width[1], rel=0.1)
+
+
+# ------------------------------------------------------------------------ any length
+def _bench_log(n, seed, h=None):
+    """The residual-length benchmark's logs (workflow/benchmarks/residual_length.py)."""
+    rng = np.random.default_rng([seed, n])
+    kind = ("sine", "multisine", "smooth")[seed % 3]
+    motion = random_motion(rng, kind, n / 1000.0, rng.uniform(0.3, 1.0))
+    return simulate_log(rng, motion, duration=n / 1000.0, step=STEP, truth_step=TRUTH_STEP,
+                        effects={"hysteresis": {"h": h}} if h else {})
+
+
+def test_clean_periodic_log_whose_dwells_fake_a_map_gets_no_effect():
+    # A 4 s sine: every turning point dwells on the same truth readings each cycle, whose shared
+    # rounding errors the per-sample likelihood counts as independent (plain delta BIC 47 for a
+    # calibration map, confirmed on held-out blocks that dwell on the same readings). Grouped by
+    # truth reading, the map's score varies 1.4 times more than independent samples would let
+    # it: its calibrated delta BIC falls below the criterion.
+    log = _bench_log(4000, 0)
+    res = select_effects(log["t"], log["truth"], log["measured"], STEP, truth_step=TRUTH_STEP)
+    assert res.effects == [] and res.explained
+    (tried,) = [r for r in res.steps if r["effect"] == "calibration_map"]
+    assert tried["delta_bic"] > 10.0 and tried["inflation"] > 1.0
+    assert tried["delta_bic_calibrated"] <= 10.0 and tried["rejected"] == "calibrated evidence"
+    assert res.heldout["before"]["std"] == res.heldout["after"]["std"]
+
+
+def test_inflation_counts_samples_that_share_one_truth_reading_once():
+    # The same clean log with every sample repeated m = 4 times (at 4 kHz: four samples on one
+    # truth reading and one rounding error each time) carries the evidence of the original,
+    # not four times it: its score sums per unit are m times larger, so the inflation c is m
+    # times the original's and the calibrated LR, 2 dll / c, is unchanged. Tolerance: c from
+    # 40 blocks has a relative sampling error of about sqrt(2/40) = 0.22 (3 of them), though
+    # the repeats move it far less.
+    log = _log(3, duration=3.0)
+    for e in (sel.fx.Hysteresis(), sel.fx.ScaleMismatch()):
+        out = []
+        for m in (1, 4):
+            tr, ct = np.repeat(log["truth"], m), np.repeat(log["counts"], m)
+            ctx = sel._make_ctx(np.arange(tr.size) / (1000.0 * m), tr, ct, STEP, TRUTH_STEP, {}, 0.0, None)
+            base = sel._Model([])
+            x, ll = sel._fit(base, ctx, sel._base_start(ctx))
+            new = sel._extend(sel._Fitted(base, x, ll), e, ctx)
+            out.append((sel._inflation(new, e, ctx), 2.0 * (new.ll - ll)))
+        (c1, lr1), (c4, lr4) = out
+        assert c1 > 1.0  # a 1 kHz sine: neighbouring samples share their truth reading
+        assert c4 / c1 == pytest.approx(4.0, rel=3 * 0.22)
+        assert lr4 / c4 == pytest.approx(lr1 / c1, rel=3 * 0.22, abs=1.0)
+
+
+def test_practical_size_keeps_a_real_but_small_effect_out():
+    # A dead band of 0.6 step moves the angle by h/2 = 0.3 step rms: found by default, and left
+    # out when the practical size asked for is above that (min_effect_rad).
+    log = _log(21, {"hysteresis": {"h": 0.6 * STEP}}, duration=8.0)
+    res = select_effects(log["t"], log["truth"], log["measured"], STEP, truth_step=TRUTH_STEP)
+    assert [e.name for e in res.effects] == ["hysteresis"]
+    assert res.effects[0].size == pytest.approx(0.3 * STEP, rel=0.1)  # +-h/2 with the sign of motion
+    big = select_effects(log["t"], log["truth"], log["measured"], STEP, truth_step=TRUTH_STEP,
+                         min_effect_rad=0.5 * STEP)
+    assert big.effects == [] and big.practical_size == 0.5 * STEP
+    assert any(r.get("rejected", "").startswith("practical size") for r in big.steps)
+
+
+def test_no_chosen_effect_leaves_the_residual_worse_and_heldout_is_reported():
+    # the hard invariant over clean and effect logs of the benchmark's kinds; the held-out
+    # figures of a found effect improve on their base model's
+    for n, seed, h in ((4000, 0, None), (4000, 1, None), (4000, 2, 0.15 * STEP), (4000, 3, -0.15 * STEP)):
+        log = _bench_log(n, seed, h)
+        res = select_effects(log["t"], log["truth"], log["measured"], STEP, truth_step=TRUTH_STEP)
+        assert res.after["std"] <= res.before["std"]
+        summary = res.to_summary()
+        assert summary["heldout_before"]["std"] > 0 and summary["heldout_after"]["std"] > 0
+        if res.effects:
+            assert summary["heldout"]["improves"] and summary["heldout_after"]["std"] < summary["heldout_before"]["std"]
+
+
+def test_a_play_and_a_dead_band_that_cancel_are_not_chosen_together():
+    # backlash +w and hysteresis -w: after the play is taken up each shifts the angle by w/2
+    # against / with the direction of motion, together by nothing
+    log = _log(21, duration=6.0)
+    grid, counts = sel._grid_and_counts(log["measured"], STEP)
+    ctx = sel._make_ctx(log["t"], log["truth"], counts, STEP, TRUTH_STEP, {}, grid, None)
+    b, hy = sel.fx.Backlash(), sel.fx.Hysteresis()
+    model = sel._Model([b, hy])
+    w = 3 * STEP
+    x = np.zeros(model.size)
+    x[model.slices[model.effects.index(b)]] = w
+    x[model.slices[model.effects.index(hy)]] = -w
+    cur = sel._Fitted(model, x, 0.0)
+    chosen = [(b, 50.0, 1.0, 0.0), (hy, 40.0, 1.0, 0.0)]
+    trial = [(50.0, 0, None, sel._shift_rms(sel._without(cur, b), cur, ctx)),
+             (40.0, 1, None, sel._shift_rms(sel._without(cur, hy), cur, ctx))]
+    assert trial[0][3] == pytest.approx(w / 2, rel=0.1) and trial[1][3] == pytest.approx(w / 2, rel=0.05)
+    weak, other = sel._cancelling_pair(cur, chosen, trial, ctx)
+    assert weak[1] == 1 and other == "backlash"
+    # a dead band of +w beside the play adds to it: no cancelling pair
+    x[model.slices[model.effects.index(hy)]] = w
+    assert sel._cancelling_pair(sel._Fitted(model, x, 0.0), chosen, trial, ctx) is None
+
+
+def test_a_lagging_start_is_cropped_and_reported_not_modelled():
+    # the measured channel creeps up to the angle over its first 30 samples (8 steps behind at
+    # first); the rest of the log holds a 1 ms latency
+    log = _log(5, {"latency": {"tau": 1e-3}}, duration=6.0)
+    m = log["measured"].copy()
+    m[:30] = m[0] - 8 * STEP * np.linspace(1.0, 0.0, 30)
+    res = select_effects(log["t"], log["truth"], m, STEP, truth_step=TRUTH_STEP)
+    assert [e.name for e in res.effects] == ["latency"]
+    (tr,) = res.transients
+    assert tr["edge"] == "start" and tr["n_samples"] == 30 and tr["t_end"] == pytest.approx(0.029)
+    assert res.kept == slice(30, log["t"].size) and res.model_prediction().size == log["t"].size - 30
+    assert "transient at the start of the log (0-0.029 s, 30 samples) was cropped" in res.message
+    clean = _log(5, duration=6.0)
+    assert select_effects(clean["t"], clean["truth"], clean["measured"], STEP, truth_step=TRUTH_STEP).transients == []

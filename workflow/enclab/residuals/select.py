@@ -34,6 +34,35 @@ remaining candidate is fitted added to the current model; the one with the large
   log-likelihood gain must be positive. Contiguous blocks keep the autocorrelated residual of
   one block out of the fit that scores it.
 
+Calibrated at any length
+------------------------
+The likelihood counts every sample as independent; the residual of a slow motion is not (a
+truth reading's rounding error is shared by every sample on it, on every pass, and a model
+error of the floor's size is smooth in time), so the plain evidence of any tiny model error
+grows with the number of samples. Candidates are ranked by the plain ``delta_bic``; one is
+accepted only if its *calibrated* evidence passes as well: the likelihood ratio divided by the
+variance inflation ``c`` of the added parameters' efficient score (:func:`_inflation`: the
+score summed over independent units, contiguous time blocks or truth readings, the larger,
+against its per-sample variance; Rotnitzky & Jewell 1990's adjusted LR), with the BIC penalty
+at the effective sample size ``n / c``. An accepted effect must also have a practical size: it
+moves the predicted angle by at least ``max(min_effect_floor_fraction * floor, min_effect_rad)``
+rms (after the refit of the other terms, so two terms that cancel add nothing), and the exact
+residual's std with it may not exceed the one without it. The backward check drops, besides
+effects below the criterion, effects below the practical size and the weaker of two chosen
+effects that cancel (together they shift the angle by less than half of what either does
+alone). Hard invariant: if the residual std after the effects is above the one before them,
+effects are dropped (the one whose removal lowers it most first) until it is not.
+
+Edge transients (a channel that lags for its first samples) are cropped before the selection
+(:func:`_edge_transients`) and reported with their time range, never modelled.
+
+Held out
+--------
+Every selection also reports held-out figures (:func:`_heldout`): the base model and the chosen
+one refitted on the even of ``heldout_blocks`` equal time blocks and scored on the odd ones
+(residual statistics as ``before``/``after``, and the held-out log-likelihood gain). A choice
+that does not lower the held-out std with a positive held-out gain is not "explained".
+
 If the best candidate fails, the next ones (by ``delta_bic``) are tried, at most
 ``max_tries``. Selection stops when no candidate passes or when, after an effect was added,
 the residual matches the exact-model floor within its interval (``SelectionResult.explained``).
@@ -133,6 +162,7 @@ class FittedEffect:
     caveat: str | None = None
     merged_with: list = field(default_factory=list)
     separated_by: str = ""
+    size: float = float("nan")
 
     @property
     def indistinguishable(self) -> list:
@@ -165,6 +195,9 @@ class FittedEffect:
             # separated from (then params are not physical values: see "merged")
             "caveat": self.caveat,
             "merged_with": list(self.merged_with),
+            # rms (rad) of the shift of the predicted angle this effect makes in the final model
+            # (the practical-size rule's measure)
+            "size": None if not np.isfinite(self.size) else float(self.size),
         }
 
 
@@ -641,6 +674,170 @@ def _intervals(fitted: _Fitted, ctx, with_cov: bool = False):
     return np.sqrt(var) * scales
 
 
+#: contiguous blocks (never splitting a run of one truth reading) whose score sums estimate the
+#: variance inflation of the evidence (module notes, "Calibrated at any length")
+_EVIDENCE_BLOCKS = 40
+
+
+def _inflation(fitted: _Fitted, e, ctx) -> float:
+    """Variance inflation ``c >= 1`` of effect ``e``'s score in ``fitted`` (module notes).
+
+    ``c = tr(I^-1 B) / k`` over the efficient score of ``e``'s ``k`` parameters (its per-sample
+    scores less their least-squares projection on the other parameters' scores): ``I`` their
+    per-sample outer product, ``B`` the outer product of their sums over independent units.
+    Two groupings, the larger ``c`` counts: :data:`_EVIDENCE_BLOCKS` contiguous time blocks
+    (a residual correlated in time) and the truth readings (every sample on one truth reading
+    shares its rounding error, on every pass: the dwells at a periodic motion's turning
+    points). Independent samples give ``c ~ 1``; a residual shared by ``m`` samples ``c ~ m``.
+    """
+    i = fitted.model.effects.index(e)
+    sl = fitted.model.slices[i]
+    k = sl.stop - sl.start
+    if k == 0:
+        return 1.0
+    scales = fitted.model.scales(ctx)
+    _, g = _scores(fitted.model, ctx, fitted.x, scales, ctx.fit_idx)
+    ge = g[:, sl]
+    others = np.delete(g, np.arange(sl.start, sl.stop), axis=1)
+    if others.shape[1]:
+        coef, *_ = np.linalg.lstsq(others, ge, rcond=None)
+        ge = ge - others @ coef
+    inv = np.linalg.pinv(ge.T @ ge)
+    truth = ctx.truth[ctx.fit_idx]
+    blocks = fx.run_blocks(truth, _EVIDENCE_BLOCKS)
+    cells = np.unique(truth, return_inverse=True)[1].ravel()
+    out = 1.0
+    for gb in (np.array([ge[b].sum(axis=0) for b in blocks]) if len(blocks) >= 4 else None,
+               _group_sums(ge, cells)):
+        if gb is None or gb.shape[0] < 4:
+            continue
+        gb = gb - gb.mean(axis=0)
+        meat = gb.T @ gb * gb.shape[0] / (gb.shape[0] - 1.0)
+        c = float(np.trace(inv @ meat)) / k
+        if np.isfinite(c):
+            out = max(out, c)
+    return out
+
+
+def _group_sums(g, groups) -> np.ndarray:
+    """Column sums of ``g`` over the sample groups labelled ``groups`` (0 .. G-1)."""
+    out = np.zeros((int(groups.max()) + 1, g.shape[1]))
+    np.add.at(out, groups, g)
+    return out
+
+
+def _shift_rms(a: _Fitted, b: _Fitted, ctx) -> float:
+    """rms (rad) of the change of the predicted angle from model ``a`` to model ``b`` on the
+    fit samples, its constant removed (the offset carries it), with the change of the noise
+    effects' variance: the size of what ``b`` adds to ``a`` after the refit of the other terms
+    (two terms that cancel add nothing)."""
+    mu_a, _ = a.model.forward(ctx, a.x)
+    mu_b, _ = b.model.forward(ctx, b.x)
+    idx = ctx.fit_idx
+    d = ((mu_b - b.x[0]) - (mu_a - a.x[0]))[idx] * ctx.step
+    dv = float(np.mean((b.model.noise_var(ctx, b.x) - a.model.noise_var(ctx, a.x))[idx]))
+    return math.sqrt(float(np.var(d)) + abs(dv))
+
+
+def _resid_std(fitted: _Fitted, ctx) -> float:
+    """Std (rad) of the exact-model residual on the fit samples."""
+    return float(np.std(_exact_residual(fitted.model, ctx, fitted.x)[ctx.fit_idx]))
+
+
+def _cancelling_pair(cur: _Fitted, chosen, trial, ctx):
+    """The weaker effect of the first pair of chosen effects that cancel each other: together
+    they shift the angle by less than half of what the smaller of them does alone. Returns
+    ``(trial row, name of the other)`` or None."""
+    for a in range(len(chosen)):
+        for b in range(a + 1, len(chosen)):
+            ea, eb = chosen[a][0], chosen[b][0]
+            if ea.kind == "discrete" or eb.kind == "discrete":
+                continue
+            ra = next(r for r in trial if r[1] == a)
+            rb = next(r for r in trial if r[1] == b)
+            joint = _shift_rms(_without(_without(cur, ea), eb), cur, ctx)
+            if joint < 0.5 * min(ra[3], rb[3]):
+                weak, other = (ra, eb) if ra[0] <= rb[0] else (rb, ea)
+                return weak, other.name
+    return None
+
+
+def _heldout(fitted: _Fitted, base: _Fitted, ctx, full, n_blocks: int) -> dict:
+    """Held-out before/after: the base model and the chosen one refitted on the even of
+    ``n_blocks`` equal time blocks (fit samples) and scored on every sample of the odd ones.
+
+    The choice of the effects is the whole log's; what is held out is the fit of their
+    parameters and of the offset. Alternate blocks keep both halves spread over the log (a map
+    of the angle is scored where its training data reached)."""
+    t0, t1 = float(full.t[0]), float(full.t[-1])
+
+    def block(t):
+        return np.minimum((n_blocks * (t - t0) / max(t1 - t0, 1e-300)).astype(int), n_blocks - 1)
+
+    train = ctx.fit_idx[block(ctx.t[ctx.fit_idx]) % 2 == 0]
+    test_fit = ctx.fit_idx[block(ctx.t[ctx.fit_idx]) % 2 == 1]
+    test = np.flatnonzero(block(full.t) % 2 == 1)
+    xb, _ = _fit(base.model, ctx, base.x, idx=train)
+    xa = _fit(fitted.model, ctx, fitted.x, idx=train)[0] if fitted.model.effects else xb
+    lb = _loglik(base.model, ctx, xb, test_fit)
+    la = _loglik(fitted.model, ctx, xa, test_fit)
+    hb = residual_stats(_Fitted(base.model, xb, lb), full, test)
+    ha = residual_stats(_Fitted(fitted.model, xa, la), full, test)
+    gain = la - lb
+    return {"before": hb, "after": ha, "loglik_gain": float(gain),
+            "improves": bool(not fitted.model.effects or (ha["std"] <= hb["std"] and gain > 0)),
+            "how": f"fitted on the even and scored on the odd of {n_blocks} equal time blocks"}
+
+
+def _edge_transients(t, truth, measured, step, truth_step, aux, line_pitch, max_fraction, sensor_var=0.0):
+    """Edge transients of the exact-model residual: ``(kept slice, [transient])``.
+
+    The base model (offset only) is fitted and its residual ``|k - floor(mu)|`` (counts) taken.
+    At each end the prefix of at most ``max_fraction`` of the log whose summed excess over the
+    interior mean is largest (the CUSUM maximum) is a transient when that excess is above
+    3 counts and above twice the largest excess of any interior window of the same length:
+    an edge is cropped only when nothing inside the log looks like it. It ends at its last
+    sample farther off than every interior sample (at the maximum when none is).
+    """
+    n = t.size
+    lmax = int(max_fraction * n)
+    if lmax < 5 or n - 2 * lmax < lmax:
+        return slice(0, n), []
+    grid, counts = _grid_and_counts(measured, step)
+    full = _make_ctx(t, truth, counts, step, truth_step, aux, grid, line_pitch)
+    full.priv["_sensor_var"] = sensor_var
+    every = max(1, math.ceil(n / _MAX_FIT_SAMPLES))
+    ctx = full if every == 1 else _subsample(full, every)
+    model = _Model([])
+    x, _ = _fit(model, ctx, _base_start(ctx))
+    mu, _ = model.forward(full, x)
+    a = np.abs(counts - np.floor(mu)).astype(float)
+    interior = a[lmax:n - lmax]
+    base = float(interior.mean())
+    ci = np.concatenate(([0.0], np.cumsum(interior - base)))
+    lo, hi, out = 0, n, []
+    for edge, x_edge in (("start", a[:lmax]), ("end", a[n - lmax:][::-1])):
+        cs = np.cumsum(x_edge - base)
+        length = int(np.argmax(cs)) + 1
+        excess = float(cs[length - 1])
+        ref = float(np.max(ci[length:] - ci[:-length])) if ci.size > length else 0.0
+        if excess > 3.0 and excess > 2.0 * max(ref, 0.0):
+            # the transient ends at its last sample farther off than any interior sample (the
+            # CUSUM maximum runs on while the unmodelled effects of the motion there are
+            # above their mean); without such samples, at the maximum
+            far = np.flatnonzero(x_edge[:length] > float(np.max(interior)))
+            length = int(far[-1]) + 1 if far.size else length
+            if edge == "start":
+                lo = length
+                t_a, t_b = float(t[0]), float(t[length - 1])
+            else:
+                hi = n - length
+                t_a, t_b = float(t[n - length]), float(t[-1])
+            out.append({"edge": edge, "t_start": t_a, "t_end": t_b, "n_samples": length,
+                        "excess_counts": excess})
+    return slice(lo, hi), out
+
+
 #: Parameter correlation above which two chosen effects are not separable on the log's motion.
 _MERGE_CORR = 0.95
 
@@ -760,13 +957,18 @@ def _angle_bins(angle, n_bins: int) -> list:
     return np.split(order, cuts)
 
 
-def residual_stats(fitted: _Fitted, ctx) -> dict:
-    """Residual statistics against the exact-model floor (see module notes)."""
+def residual_stats(fitted: _Fitted, ctx, idx=None) -> dict:
+    """Residual statistics against the exact-model floor (see module notes); with ``idx`` on
+    those samples of ``ctx`` only (the held-out figures)."""
     mu, _ = fitted.model.forward(ctx, fitted.x)
-    kpred = np.floor(mu)
-    r = ctx.step * (ctx.counts - kpred)
-    half = 0.5 * ctx.truth_step / ctx.step
     sigma = np.sqrt(fitted.model.noise_var(ctx, fitted.x)) / ctx.step + 1e-9
+    truth = ctx.truth
+    counts = ctx.counts
+    if idx is not None:
+        mu, sigma, truth, counts = mu[idx], sigma[idx], truth[idx], counts[idx]
+    kpred = np.floor(mu)
+    r = ctx.step * (counts - kpred)
+    half = 0.5 * ctx.truth_step / ctx.step
     reach = int(math.ceil(half + 7.0 * float(np.max(sigma)))) + 2
     js = np.arange(-reach, reach + 1)
     P = _floor_probs(mu, half, sigma, js)
@@ -782,7 +984,7 @@ def residual_stats(fitted: _Fitted, ctx) -> dict:
     var = float(r.var())
     d = r**2 - er2
     se = max(_block_se(d, np.array_split(np.arange(d.size), _FLOOR_BLOCKS)),
-             _block_se(d, _angle_bins(ctx.truth, _FLOOR_BLOCKS)))
+             _block_se(d, _angle_bins(truth, _FLOOR_BLOCKS)))
     lo, hi = max(floor_var - _Z90 * se, 0.0), floor_var + _Z90 * se
     limit = floor_var + _T99_BLOCKS * se
     return {
@@ -812,6 +1014,16 @@ class SelectionResult:
     nuisance_jitter_counts: float
     _fitted: _Fitted = field(repr=False, default=None)
     _ctx: _Ctx = field(repr=False, default=None)
+    #: held-out figures (:func:`_heldout`): ``before``, ``after`` (residual statistics on the
+    #: held-out samples), ``loglik_gain`` (nats), ``improves``, ``how``
+    heldout: dict = field(default_factory=dict)
+    #: edge transients cropped before the selection: ``edge``, ``t_start``, ``t_end``,
+    #: ``n_samples``, ``excess_counts``
+    transients: list = field(default_factory=list)
+    #: the samples the selection ran on (the log without its edge transients)
+    kept: slice = field(default_factory=lambda: slice(None))
+    #: the practical size (rad) an effect had to reach
+    practical_size: float = 0.0
 
     def model_prediction(self, t=None, truth=None, aux=None) -> np.ndarray:
         """Measured-channel reading (rad) predicted by the exact model with the chosen effects.
@@ -848,6 +1060,13 @@ class SelectionResult:
             "effects": [e.to_dict() for e in self.effects],
             "explained": bool(self.explained),
             "message": self.message,
+            # the same model refitted on the even time blocks, scored on the odd ones
+            "heldout_before": clean(self.heldout["before"]) if self.heldout else None,
+            "heldout_after": clean(self.heldout["after"]) if self.heldout else None,
+            "heldout": {"how": self.heldout.get("how"), "loglik_gain": self.heldout.get("loglik_gain"),
+                        "improves": self.heldout.get("improves")} if self.heldout else None,
+            "practical_size": float(self.practical_size),
+            "transients": [dict(tr) for tr in self.transients],
         }
 
 
@@ -1059,6 +1278,10 @@ def select_effects(
     stop_at_floor: bool = True,
     distinguish_bic: float | None = None,
     noise_std: float = 0.0,
+    min_effect_floor_fraction: float = 0.1,
+    min_effect_rad: float = 0.0,
+    heldout_blocks: int = 10,
+    transient_max_fraction: float = 0.02,
 ) -> SelectionResult:
     """Find, fit and report the effects that explain ``measured`` against ``truth``.
 
@@ -1100,6 +1323,16 @@ def select_effects(
         White noise of the measured sensor (rad) known from elsewhere
         (:func:`enclab.residuals.diagnostics.estimate_floor`): part of the exact model, like the
         truth's quantization, it enters every model's jitter and the floor.
+    min_effect_floor_fraction, min_effect_rad : float
+        Practical size (module notes, "Calibrated at any length"): an effect is chosen only if
+        it moves the predicted angle by at least the larger of this fraction of the
+        exact-model floor std and this size (rad), rms over the log; the verdict calls a
+        residual within that size of the floor explained.
+    heldout_blocks : int
+        Time blocks of the held-out figures: the model is refitted on the even blocks and
+        scored on the odd ones (``SelectionResult.heldout``).
+    transient_max_fraction : float
+        Longest edge transient (share of the log) looked for at each end; 0 looks for none.
 
     Returns
     -------
@@ -1121,8 +1354,24 @@ def select_effects(
         unknown = candidates - known
         if unknown:
             raise ValueError(f"unknown candidate effects {sorted(unknown)}; known: {sorted(known)}")
+    for name, v in (("min_effect_floor_fraction", min_effect_floor_fraction), ("min_effect_rad", min_effect_rad),
+                    ("transient_max_fraction", transient_max_fraction)):
+        if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+            raise ValueError(f"{name} must be a finite number >= 0, got {v!r}")
+    if not (isinstance(heldout_blocks, int) and heldout_blocks >= 2):
+        raise ValueError(f"heldout_blocks must be an integer >= 2, got {heldout_blocks!r}")
     if truth_step is None:
         truth_step = estimate_grid_step(truth)
+    # Edge transients (a channel that lags for its first samples, a logger that stops mid-move)
+    # are cropped, not modelled: found on the exact-model residual of the base model.
+    kept = slice(0, t.size)
+    transients = []
+    if transient_max_fraction > 0:
+        kept, transients = _edge_transients(t, truth, measured, step, float(truth_step), aux, line_pitch,
+                                            transient_max_fraction, float(noise_std) ** 2)
+        if transients:
+            t, truth, measured = t[kept], truth[kept], measured[kept]
+            aux = {k: v[kept] for k, v in aux.items()}
     grid, counts = _grid_and_counts(measured, step)
     full = _make_ctx(t, truth, counts, step, float(truth_step), aux, grid, line_pitch)
     full.priv["_sensor_var"] = float(noise_std) ** 2
@@ -1137,7 +1386,10 @@ def select_effects(
     base_ll = ll
     # the offset c is only known modulo whole counts from a poor start: refine from the fit
     cur = _Fitted(base_model, x, ll)
+    base_fit = cur
     before = residual_stats(cur, full)
+    # the practical size an effect must have (rms shift of the predicted angle, rad)
+    min_size = max(float(min_effect_floor_fraction) * before["floor_std"], float(min_effect_rad))
     chosen = []  # (effect, delta_bic, heldout, p)
     steps = []
     step_trials = []  # per step: {candidate name: delta_bic}
@@ -1171,12 +1423,32 @@ def select_effects(
             record = {"step": len(chosen) + 1, "effect": e.name, "delta_bic": dbic, "p_value": p}
             steps.append(record)
             trials.append((dbic, p, cand, e, new, record))
+        # ranked by the plain delta BIC (the calibration divides every candidate's evidence by
+        # its own inflation estimate, whose sampling error would reorder effects of like
+        # evidence); accepted on the calibrated one
         trials.sort(key=lambda r: -r[0])
         step_trials.append({r[3].name: r[0] for r in trials})
         picked = None
         for dbic, p, cand, e, new, record in trials[:max_tries]:
             if dbic <= bic_threshold or (np.isfinite(p) and p >= alpha):
                 break
+            if e.kind != "discrete":
+                k = new.model.n_params() - cur.model.n_params()
+                c = _inflation(new, e, ctx)
+                lr = 2.0 * (new.ll - cur.ll) / c
+                record.update(inflation=c, delta_bic_calibrated=lr - k * math.log(n_fit / c),
+                              p_value_calibrated=_lr_pvalue(lr, k, len(e.boundary)))
+                if record["delta_bic_calibrated"] <= bic_threshold or record["p_value_calibrated"] >= alpha:
+                    record["rejected"] = "calibrated evidence"
+                    continue
+            size = _shift_rms(cur, new, ctx)
+            record["size"] = size
+            if size < min_size:
+                record["rejected"] = f"practical size: moves the angle by {size:.3g} rad rms < {min_size:.3g}"
+                continue
+            if _resid_std(new, ctx) > _resid_std(cur, ctx):
+                record["rejected"] = "the residual std with it is above the one without it"
+                continue
             gain = _heldout_gain(cur, new, ctx, n_folds)
             record["delta_heldout"] = gain
             if gain > 0:
@@ -1193,24 +1465,58 @@ def select_effects(
     # Backward check: an effect that entered early may be made redundant by later ones (a
     # scale mismatch chosen before an angle harmonic whose once-per-turn term also carries the
     # slope over a short stroke). Every effect must still be worth its parameters in the final
-    # model; the weakest one below the criterion is dropped and the check repeated.
+    # model (calibrated evidence), still move the angle by the practical size, and no two
+    # chosen effects may cancel each other (a play of +w beside a dead band of -w: together they
+    # move the angle by less than half of what either does alone). The weakest offender is
+    # dropped and the check repeated.
     kept_bic = {}
-    while len(chosen) > 1:
+    while chosen:
         trial = []
         for j, (e, *_) in enumerate(chosen):
             reduced = _drop(cur, e, ctx)
             k = cur.model.n_params() - reduced.model.n_params()
-            trial.append((2.0 * (cur.ll - reduced.ll) - k * math.log(n_fit), j, reduced))
-        d, j, reduced = min(trial, key=lambda r: r[0])
-        kept_bic = {chosen[i][0].name: v for v, i, _ in trial}
-        if d > bic_threshold:
+            d = 2.0 * (cur.ll - reduced.ll) - k * math.log(n_fit)
+            if e.kind != "discrete" and d > bic_threshold:  # calibrated (never above the plain one)
+                c = _inflation(cur, e, ctx)
+                d = 2.0 * (cur.ll - reduced.ll) / c - k * math.log(n_fit / c)
+            trial.append((d, j, reduced, _shift_rms(_without(cur, e), cur, ctx)))
+        kept_bic = {chosen[i][0].name: v for v, i, _, _ in trial}
+        reason, drop = None, None
+        small = [r for r in trial if r[3] < min_size]
+        weak = [r for r in trial if r[0] <= bic_threshold] if len(chosen) > 1 else []
+        if small:
+            reason, drop = "practical size", min(small, key=lambda r: r[3])
+        elif weak:
+            reason, drop = "backward", min(weak, key=lambda r: r[0])
+        else:
+            pair = _cancelling_pair(cur, chosen, trial, ctx)
+            if pair is not None:
+                reason, drop = "cancels " + pair[1], pair[0]
+        if drop is None:
             break
-        steps.append({"step": "backward", "effect": chosen[j][0].name, "delta_bic": d, "removed": True})
+        d, j, reduced, size = drop
+        steps.append({"step": "backward", "effect": chosen[j][0].name, "delta_bic": d, "size": size,
+                      "removed": True, "reason": reason})
         del chosen[j], chosen_trials[j]
         cur = reduced
         kept_bic = {}
 
     after = residual_stats(cur, full)
+    # Hard invariant: no chosen effect leaves the residual worse than before any effect.
+    while chosen and after["std"] > before["std"]:
+        trial = []
+        for j, (e, *_) in enumerate(chosen):
+            reduced = _drop(cur, e, ctx)
+            trial.append((residual_stats(reduced, full), j, reduced))
+        st, j, reduced = min(trial, key=lambda r: r[0]["std"])
+        steps.append({"step": "invariant", "effect": chosen[j][0].name, "removed": True,
+                      "reason": "the residual std with the effects is above the one before them"})
+        del chosen[j], chosen_trials[j]
+        cur, after = reduced, st
+        kept_bic = {}
+    if not chosen:
+        cur, after = base_fit, before
+    heldout = _heldout(cur, base_fit, ctx, full, heldout_blocks)
     alternatives = _alternatives(cur, chosen, chosen_trials, all_candidates, ctx, margin)
     se, cov = _intervals(cur, ctx, with_cov=True)
     lows = [b[0] for b in cur.model.bounds(ctx)]
@@ -1233,6 +1539,7 @@ def select_effects(
             final_bic = 2.0 * (cur.ll - base_ll) - k * math.log(n_fit)
         fitted_effects.append(FittedEffect(e.name, params, ci, dbic, gain, p, e.derived(params), alts, margin,
                                            final_bic))
+        fitted_effects[-1].size = _shift_rms(_without(cur, e), cur, ctx)
         # An interval clipped at both ends of the parameter's range (or a non-finite standard
         # error) means the data do not pin the parameter down: typically two selected effects
         # that are collinear over this motion (angle harmonics vs scale over a short stroke).
@@ -1244,10 +1551,25 @@ def select_effects(
         fe.caveat = e.caveat(ctx)
         fe.separated_by = e.separated_by
     _merge_confounded(fitted_effects, [c[0] for c in chosen], cur, cov, ctx)
-    explained = after["std"] <= after["floor_limit"]
+    at_floor = after["std"] <= max(after["floor_limit"], after["floor_std"] + min_size)
+    heldout_ok = not fitted_effects or (heldout["after"]["std"] <= heldout["before"]["std"]
+                                        and heldout["loglik_gain"] > 0)
+    explained = at_floor and heldout_ok
     message = _message(fitted_effects, explained, before, after)
-    return SelectionResult(fitted_effects, before, after, bool(explained), message, steps,
-                           float(cur.x[0]), float(10.0 ** cur.x[1]), cur, full)
+    if fitted_effects and not heldout_ok:
+        message += (f"; the effects do not improve the held-out error ({heldout['how']}: std "
+                    f"{heldout['before']['std']:.3g} rad before, {heldout['after']['std']:.3g} after, "
+                    f"log-likelihood gain {heldout['loglik_gain']:.3g}): not explained")
+    for tr in transients:
+        message += (f"; a transient at the {tr['edge']} of the log ({tr['t_start']:.6g}-{tr['t_end']:.6g} s, "
+                    f"{tr['n_samples']} samples) was cropped, not modelled")
+    out = SelectionResult(fitted_effects, before, after, bool(explained), message, steps,
+                          float(cur.x[0]), float(10.0 ** cur.x[1]), cur, full)
+    out.heldout = heldout
+    out.transients = transients
+    out.kept = kept
+    out.practical_size = min_size
+    return out
 
 
 def _fmt(e: FittedEffect) -> str:
