@@ -8,15 +8,19 @@ this one builds the same workspace afresh (same seeds, same bytes), kills it onc
 outputs exist and jobs are running, unlocks and reruns the two passes of ``make run``.
 """
 import os
-import resource
 import signal
 import subprocess
+import sys
 import time
+from pathlib import Path
 
 import pytest
 
 from workspace import (result_digests, run_two_passes, run_workflow, snakemake_command,
                        standard_workspace)
+
+sys.path.insert(0, str(Path(__file__).parent / "corpus"))
+from run import file_size_limit  # noqa: E402
 
 pytestmark = pytest.mark.slow
 
@@ -58,15 +62,8 @@ def test_sigkill_mid_job_then_rerun_matches_an_uninterrupted_run(killed_and_reru
 
 
 # A full disk, simulated: a file-size limit (RLIMIT_FSIZE, `ulimit -f`) with SIGXFSZ ignored, so
-# that a write past it fails with EFBIG ("File too large") as on a full disk or a quota. The
-# standard workspace's staged outputs (derivatives.parquet, figures) are larger than this;
-# Snakemake's own records are not.
-FILE_SIZE_LIMIT = 20_000
-
-
-def _file_size_limit():
-    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
-    resource.setrlimit(resource.RLIMIT_FSIZE, (FILE_SIZE_LIMIT, FILE_SIZE_LIMIT))
+# that a write past it fails with EFBIG ("File too large") as on a full disk or a quota
+# (tests/corpus/run.py: the limit leaves Snakemake's copies of the workflow's files room).
 
 
 @pytest.fixture(scope="module")
@@ -76,7 +73,7 @@ def disk_full_and_rerun(tmp_path_factory):
     full = subprocess.run(snakemake_command(work, "--keep-going", "--", "results/good1/summary.json",
                                             "results/good2/summary.json"),
                           cwd=work, capture_output=True, text=True, timeout=900,
-                          preexec_fn=_file_size_limit, env=dict(os.environ, MPLBACKEND="Agg"))
+                          preexec_fn=file_size_limit, env=dict(os.environ, MPLBACKEND="Agg"))
     logs = {k: (work / f"results/{k}/logs/quantization.log").read_text() for k in ("good1", "good2")}
     # The limit lifted, the two passes of `make run`, with no cleaning and no --unlock.
     rerun = run_two_passes(work, params)

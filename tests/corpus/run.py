@@ -76,10 +76,22 @@ def _config(manifest: str, changes: dict | None = None) -> dict:
 # Root reads a mode-000 file anyway; without these capabilities it reads as a user would.
 _AS_A_USER = ["setpriv", "--inh-caps=-dac_override,-dac_read_search",
               "--bounding-set=-dac_override,-dac_read_search"]
+def disk_full_limit() -> int:
+    """Bytes past which a write fails, for a simulated full disk.
+
+    Snakemake's source cache copies the workflow's own files (schemas, rule files, scripts)
+    before any job runs, so the limit leaves the largest of them room (a quarter more than its
+    size, and never under 20 kB): a limit fixed by hand fails the run itself once a schema grows
+    past it. A log's staged outputs (its Parquet tables and figures) are larger.
+    """
+    sources = [ROOT / "Snakefile", *(ROOT / "workflow" / "schemas").glob("*"),
+               *(ROOT / "workflow" / "rules").glob("*.smk"), *(ROOT / "scripts").glob("*.py")]
+    return max(20_000, int(1.25 * max(p.stat().st_size for p in sources)))
+
+
 # A full disk, simulated: writes past this many bytes fail with EFBIG ("File too large"), as
-# on a full disk or a quota (SIGXFSZ ignored). A small log's staged derivatives.parquet is
-# larger; Snakemake's own records are not.
-FILE_SIZE_LIMIT = 20_000
+# on a full disk or a quota (SIGXFSZ ignored).
+FILE_SIZE_LIMIT = disk_full_limit()
 
 
 def unreadable_files_possible() -> bool:
@@ -87,7 +99,8 @@ def unreadable_files_possible() -> bool:
     return os.geteuid() != 0 or shutil.which("setpriv") is not None
 
 
-def _file_size_limit() -> None:
+def file_size_limit() -> None:
+    """``preexec_fn`` of a workflow run on a full disk (:data:`FILE_SIZE_LIMIT`)."""
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
     resource.setrlimit(resource.RLIMIT_FSIZE, (FILE_SIZE_LIMIT, FILE_SIZE_LIMIT))
 
@@ -101,7 +114,7 @@ def _snakemake(work: Path, config: dict, *extra: str, disk_full: bool = False
         command = _AS_A_USER + command
     return subprocess.run(command, cwd=work, capture_output=True, text=True, timeout=1200,
                           env=dict(os.environ, MPLBACKEND="Agg"),
-                          preexec_fn=_file_size_limit if disk_full else None)
+                          preexec_fn=file_size_limit if disk_full else None)
 
 
 def _error_line(text: str) -> str:
