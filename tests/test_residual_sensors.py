@@ -94,6 +94,27 @@ def test_table_entries_are_the_harmonics_at_the_grid_angles():
     np.testing.assert_allclose([e["correction"] for e in entries], -expect, rtol=0, atol=1e-18)
 
 
+def test_a_partial_turn_table_holds_the_map_not_the_channels_zero_offset():
+    # A 1 rad stroke: a 2nd-harmonic error of 2e-4 rad beside a 0.5 rad offset between the two
+    # channels' zeros. Over a sixth of a turn the harmonics and the constant are confounded
+    # (the curve's mean there is free); the table's covered entries follow the error curve
+    # less its mean there, so they meet the uncovered entries (0) without a step.
+    rng = np.random.default_rng(7)
+    a = 0.5 + 0.5 * np.sin(2 * np.pi * np.arange(20_000) / 2_000.0)
+    true_error = 2e-4 * np.sin(2 * a)
+    fit = lut.angle_map(a, 0.5 + true_error + rng.normal(0.0, 2e-5, a.size), n_entries=256, max_order=4)
+    cov = np.array([e["covered"] for e in fit["entries"]])
+    assert 0 < cov.mean() < 0.3
+    err = np.array([e["error"] for e in fit["entries"]])[cov]
+    grid = 2 * np.pi * np.arange(256)[cov] / 256
+    expect = 2e-4 * np.sin(2 * grid)
+    # the harmonics are free over a partial turn; what a 2e-5 noise on 20,000 samples leaves
+    # of the curve's shape is a few 1e-6: 2e-5 rad bounds it with a wide margin, and the
+    # offset (0.5 rad) is 25,000 times that
+    np.testing.assert_allclose(err - err.mean(), expect - expect.mean(), rtol=0, atol=2e-5)
+    assert abs(err.mean()) < 1e-12 and fit["covered_level"] != 0.0
+
+
 def test_same_grid_reference_is_analysed_and_a_coarser_one_is_named():
     rng = np.random.default_rng(2)
     step = 7.84422e-05

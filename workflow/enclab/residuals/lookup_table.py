@@ -40,7 +40,8 @@ ARCSEC_PER_RAD = 180.0 * 3600.0 / math.pi
 CONVENTION = ("angle: the measured channel's reading (rad), the table spans one revolution of the "
               "measured side from 0 at entry 0 in steps of 2 pi / N; error = measured - truth - "
               "offset; correction = -error; true angle = measured + correction(measured), linear "
-              "interpolation between entries, periodic over 2 pi")
+              "interpolation between entries, periodic over 2 pi; over part of a revolution the covered "
+              "entries have zero mean (covered_level_rad, the channels' zero offset there, removed)")
 
 
 def harmonic_columns(angle, order: int) -> np.ndarray:
@@ -164,16 +165,22 @@ def angle_map(angle, error, *, n_entries: int = 256, max_order: int = 8, n_block
     }
     covered = _covered(a, int(n_entries))
     out["covered_fraction"] = float(np.mean(covered))
-    out["entries"] = lookup_entries(harm, int(n_entries), covered=covered)
+    # Over part of a revolution the harmonics and the constant are confounded: the curve's mean
+    # over the covered angles is then an offset between the two channels' zeros (the constant
+    # column takes it back), not an angle error. The table holds the map less that mean, so
+    # that its covered entries meet the uncovered ones (0) without a step of that size.
+    level = 0.0 if covered.all() else float(np.mean(harmonic_curve(harm, grid)[covered]))
+    out["covered_level"] = level
+    out["entries"] = lookup_entries(harm, int(n_entries), covered=covered, level=level)
     return out
 
 
-def lookup_entries(coefficients, n_entries: int, covered=None) -> list[dict]:
+def lookup_entries(coefficients, n_entries: int, covered=None, level: float = 0.0) -> list[dict]:
     """``[{"index", "angle", "error", "correction", "covered"}]`` (rad) of the harmonic map at
-    ``2 pi j / n_entries``; an entry outside the angles the log covered has correction 0 and
-    ``covered`` False (the map says nothing there)."""
+    ``2 pi j / n_entries``, less ``level`` (rad); an entry outside the angles the log covered
+    has correction 0 and ``covered`` False (the map says nothing there)."""
     grid = 2.0 * np.pi * np.arange(int(n_entries)) / int(n_entries)
-    err = harmonic_curve(coefficients, grid)
+    err = harmonic_curve(coefficients, grid) - float(level)
     cov = np.ones(grid.size, bool) if covered is None else np.asarray(covered, bool)
     err = np.where(cov, err, 0.0)
     return [{"index": j, "angle": float(grid[j]), "error": float(err[j]), "correction": float(-err[j]),
@@ -198,6 +205,8 @@ def table_document(fit: dict, *, channel: str, log_id: str, floor: dict | None =
                           "harmonics": _figures(fit["heldout_rms"], step),
                           "without_map": _figures(fit["heldout_rms_none"], step)},
         "covered_fraction": fit["covered_fraction"],
+        # removed from the covered entries: the channels' zero offset over a partial turn
+        "covered_level_rad": fit.get("covered_level", 0.0),
         "entries": fit["entries"],
     }
     if floor is not None:
