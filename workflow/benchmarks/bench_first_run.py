@@ -85,7 +85,7 @@ def measure(repo: Path, commit: str, target: str, quick: bool, keep: bool,
            "workflow_s": None, "report_s": None, "report_mb": None, "jobs": None,
            "exit_code": done.returncode, "load_start": round(load_start, 2),
            "load_end": round(_load(), 2),
-           "command": f"git clone {repo} && git checkout {rev} && {shlex.join(command)}"}
+           "command": f"git clone <this repository> && git checkout {rev} && {shlex.join(command)}"}
     if target == "run":
         span, jobs = _snakemake_span(clone)
         report = clone / "results/report.html"

@@ -58,7 +58,7 @@ def design_table(result: SearchResult) -> pd.DataFrame:
 
 def run_design(design: Mapping, devices: Mapping | None = None, derivatives: Mapping | None = None,
                trajectory: np.ndarray | None = None, simulate: bool = True) -> tuple[dict, pd.DataFrame, Figure]:
-    """Search, choose, prove by simulation; the ``design`` block of DESIGN.md section 3.
+    """Search, choose, prove by simulation; the ``design`` block of summary.json (docs/architecture.md).
 
     Parameters
     ----------

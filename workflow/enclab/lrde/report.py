@@ -1,4 +1,4 @@
-"""The ``lrde`` block of ``summary.json`` (DESIGN.md section 3) and a Markdown report.
+"""The ``lrde`` block of ``summary.json`` (docs/architecture.md, "summary.json") and a Markdown report.
 
 References
 ----------
@@ -42,7 +42,7 @@ def summary_block(fit, dwell: dict) -> dict:
     Returns
     -------
     dict
-        Keys of DESIGN.md section 3: ``A12``, ``a_eq``, ``E_b``, ``f_hz`` each
+        Keys of summary.json (docs/architecture.md): ``A12``, ``a_eq``, ``E_b``, ``f_hz`` each
         ``{median, q05, q95}`` (rad, Hz); ``offset_a`` and ``bias_b`` the same or None, with
         ``reason``; ``dwell_formula_A12`` (eq. 4 at the mean half-widths, rad or None);
         ``diagnostics`` ``{rhat_max, ess_min, tau_max, converged}``. Extra keys: ``sigma``,
