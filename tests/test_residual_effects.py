@@ -377,6 +377,45 @@ def test_level_shift_prepare_finds_the_time_and_leaves_whole_counts_to_missed_co
     assert proposed <= 10
 
 
+def _ar1(rng, n, phi):
+    e = rng.normal(size=n)
+    out = np.empty(n)
+    out[0] = e[0] / math.sqrt(1 - phi * phi)
+    for j in range(1, n):
+        out[j] = phi * out[j - 1] + e[j]
+    return out
+
+
+def test_long_run_inflation_is_one_for_white_noise_and_the_ar1_ratio_for_ar1():
+    # batch means over 40 blocks: the estimate's relative sd is sqrt(2 / 40) = 0.22, so 3 sd
+    # is a relative 0.67; AR(1) long-run / per-sample variance = (1 + phi) / (1 - phi)
+    rng = np.random.default_rng(5)
+    assert 1.0 <= fx.long_run_inflation(rng.normal(size=40_000)) <= 1.67
+    phi = 0.9
+    ratio = (1 + phi) / (1 - phi)
+    assert fx.long_run_inflation(_ar1(rng, 40_000, phi)) == pytest.approx(ratio, rel=0.67)
+
+
+def test_level_shift_interval_widens_on_a_residual_correlated_in_time():
+    # the same shift on white and on AR(1) residuals of the same per-sample variance: the
+    # time interval on the correlated one is wider (its profile is scaled by the long-run
+    # variance, ~19x here), and both hold the true time
+    rng = np.random.default_rng(6)
+    n = 6000
+    ctx = _ShiftCtx(n)
+    sd = STEP / math.sqrt(12)
+    white = rng.normal(0, sd, n)
+    phi = 0.9
+    red = _ar1(rng, n, phi) * sd * math.sqrt(1 - phi * phi)
+    widths = []
+    for noise in (white, red):
+        e = fx.LevelShift()
+        assert e.prepare(ctx, noise + 1.5 * STEP * (ctx.t >= 3.7))
+        assert e.interval[0] <= 3.7 <= e.interval[1] + 1e-3
+        widths.append(e.interval[1] - e.interval[0])
+    assert widths[1] > 2 * widths[0]
+
+
 def test_level_shift_at_the_torque_sign_changes_matches_the_simulated_preload():
     rng = np.random.default_rng(6)
     n = 8000

@@ -544,3 +544,24 @@ def test_a_lagging_start_is_cropped_and_reported_not_modelled():
     assert "transient at the start of the log (0-0.029 s, 30 samples) was cropped" in res.message
     clean = _log(5, duration=6.0)
     assert select_effects(clean["t"], clean["truth"], clean["measured"], STEP, truth_step=TRUTH_STEP).transients == []
+
+
+def test_an_effect_of_one_part_of_the_log_that_worsens_the_heldout_error_is_dropped():
+    # a dead band in the even tenths of the log only: over the whole log it reads as a dead band
+    # of about half the width, but fitted on the even tenths (held-out training) it predicts a
+    # full band where there is none, so the held-out std rises above the offset-only model's
+    def log(effects):
+        rng = np.random.default_rng(1)
+        motion = random_motion(rng, "sine", 6.0, 0.5)
+        return simulate_log(rng, motion, duration=6.0, step=STEP, truth_step=TRUTH_STEP, effects=effects)
+    clean, banded = log({}), log({"hysteresis": {"h": 0.6 * STEP}})
+    assert np.array_equal(clean["truth"], banded["truth"])
+    t = clean["t"]
+    tenth = np.minimum((10 * (t - t[0]) / (t[-1] - t[0])).astype(int), 9)
+    measured = np.where(tenth % 2 == 0, banded["measured"], clean["measured"])
+    res = select_effects(t, clean["truth"], measured, STEP, truth_step=TRUTH_STEP)
+    dropped = [s for s in res.steps if s.get("step") == "heldout"]
+    assert [s["effect"] for s in dropped] == ["hysteresis"]
+    summary = res.to_summary()
+    assert summary["heldout_after"]["std"] <= summary["heldout_before"]["std"]
+    assert not res.explained

@@ -228,6 +228,10 @@ class Effect:
         """Extra derived quantities for reports (e.g. amplitude and phase)."""
         return {}
 
+    def describe(self, params: dict) -> str:
+        """The fitted values in words for the verdict (default: each parameter and its value)."""
+        return ", ".join(f"{k} {v:.3g}" for k, v in params.items())
+
     #: What a reduced form (:meth:`reduced`) keeps, in words (None for the full form).
     form = None
 
@@ -299,6 +303,13 @@ class Hysteresis(Effect):
     def apply(self, theta, t, velocity, aux, params):
         return theta - 0.5 * params[0] * aux["_motion_sign"]
 
+    def derived(self, params):
+        return {"band_width": abs(params["h"]), "measured_lags": float(params["h"] >= 0)}
+
+    def describe(self, params):
+        h = params["h"]
+        return f"width {abs(h):.3g} rad, the measured channel {'lags' if h >= 0 else 'leads'}"
+
 
 class Backlash(Effect):
     """Backlash (play operator) of signed width ``w`` (rad) between truth and measured side.
@@ -338,7 +349,11 @@ class Backlash(Effect):
         return theta + corr if w >= 0 else theta - corr
 
     def derived(self, params):
-        return {"play_width": abs(params["w"])}
+        return {"play_width": abs(params["w"]), "measured_lags": float(params["w"] >= 0)}
+
+    def describe(self, params):
+        w = params["w"]
+        return f"play {abs(w):.3g} rad, driven from the {'truth' if w >= 0 else 'measured'} side"
 
 
 # An angle harmonic and a scale error differ only over a full turn: a harmonic returns, a
@@ -907,6 +922,23 @@ class SlowDrift(Effect):
         return out
 
 
+def long_run_inflation(e, n_blocks: int = 40) -> float:
+    """Ratio (>= 1) of the long-run variance of the series ``e`` to its per-sample variance.
+
+    Batch means: the variance of the sums over ``n_blocks`` contiguous blocks, divided by the
+    block length, against the per-sample variance. A white series gives about 1; a series
+    correlated over ``m`` samples about ``m`` (capped by the block length)."""
+    e = np.asarray(e, dtype=float)
+    e = e - e.mean()
+    n_blocks = min(n_blocks, e.size // 2)
+    per_sample = float(np.mean(e * e))
+    if n_blocks < 2 or per_sample <= 0.0:
+        return 1.0
+    length = e.size // n_blocks
+    sums = e[:n_blocks * length].reshape(n_blocks, length).sum(axis=1)
+    return max(1.0, float(np.mean(sums * sums)) / length / per_sample)
+
+
 class LevelShift(Effect):
     """A change of the reading's offset by ``d`` (rad, any size, not a whole number of steps).
 
@@ -933,7 +965,8 @@ class LevelShift(Effect):
     number of steps on a channel without sensor noise is a missed count
     (:class:`MissedCounts`), not a level shift. Derived: ``t_shift`` (s, the time, or the first
     sign change), ``t_lo``, ``t_hi`` (the times whose split is within the 90 % chi2_1 profile
-    of the best, residual samples taken as independent: a lower bound of the width),
+    of the best, the profile scaled by the residual's long-run variance
+    (:func:`long_run_inflation`), so a residual correlated in time widens the interval),
     ``at_sign_changes`` (1 for the second form) and ``n_shifts``. Signature: the residual
     ``measured - truth`` steps by ``d`` at one moment (or at every reversal of the torque) and
     keeps its level, at every angle and speed.
@@ -1007,7 +1040,10 @@ class LevelShift(Effect):
         whole = round(d / ctx.step)
         if not sensor and whole != 0 and abs(d / ctx.step - whole) < 0.1:
             return False
-        ok = np.flatnonzero(gain >= gain[k] - 2.706 * var) + 1
+        # the residual of a slow motion is correlated in time: the profile's width is measured
+        # in the long-run variance of the two-level residual, not in its per-sample variance
+        two_levels = np.where(np.arange(n) < split, np.mean(y[:split]), np.mean(y[split:]))
+        ok = np.flatnonzero(gain >= gain[k] - 2.706 * var * long_run_inflation(y - two_levels)) + 1
         self.t_shift = 0.5 * float(t[split - 1] + t[split])
         self.interval = (float(t[ok.min() - 1]), float(t[ok.max()]))
         self.driver, self.n_shifts = None, 1

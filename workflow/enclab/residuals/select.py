@@ -51,7 +51,8 @@ residual's std with it may not exceed the one without it. The backward check dro
 effects below the criterion, effects below the practical size and the weaker of two chosen
 effects that cancel (together they shift the angle by less than half of what either does
 alone). Hard invariant: if the residual std after the effects is above the one before them,
-effects are dropped (the one whose removal lowers it most first) until it is not.
+effects are dropped (the one whose removal lowers it most first) until it is not; the same
+holds held out (below): no chosen effect leaves the held-out std above the one without it.
 
 Edge transients (a channel that lags for its first samples) are cropped before the selection
 (:func:`_edge_transients`) and reported with their time range, never modelled.
@@ -60,8 +61,10 @@ Held out
 --------
 Every selection also reports held-out figures (:func:`_heldout`): the base model and the chosen
 one refitted on the even of ``heldout_blocks`` equal time blocks and scored on the odd ones
-(residual statistics as ``before``/``after``, and the held-out log-likelihood gain). A choice
-that does not lower the held-out std with a positive held-out gain is not "explained".
+(residual statistics as ``before``/``after``, and the held-out log-likelihood gain). An effect
+whose removal lowers the held-out std is dropped (the largest such drop first, repeated), so no
+chosen effect makes the held-out error worse. A choice that does not lower the held-out std with
+a positive held-out gain is not "explained".
 
 If the best candidate fails, the next ones (by ``delta_bic``) are tried, at most
 ``max_tries``. Selection stops when no candidate passes or when, after an effect was added,
@@ -163,6 +166,7 @@ class FittedEffect:
     merged_with: list = field(default_factory=list)
     separated_by: str = ""
     size: float = float("nan")
+    text: str = ""
 
     @property
     def indistinguishable(self) -> list:
@@ -1517,6 +1521,32 @@ def select_effects(
     if not chosen:
         cur, after = base_fit, before
     heldout = _heldout(cur, base_fit, ctx, full, heldout_blocks)
+    # Held-out invariant: no chosen effect may leave the held-out error above the one without
+    # it (an effect fitted to noise or to structure of one part of the log does not carry over
+    # to the other). The effect whose removal lowers the held-out std most goes first.
+    while chosen:
+        if len(chosen) == 1:
+            trial = [(heldout["before"]["std"], 0, base_fit, None)]
+        else:
+            trial = []
+            for j, (e, *_) in enumerate(chosen):
+                reduced = _drop(cur, e, ctx)
+                h = _heldout(reduced, base_fit, ctx, full, heldout_blocks)
+                trial.append((h["after"]["std"], j, reduced, h))
+        best = min(trial, key=lambda r: r[0])
+        if best[0] >= heldout["after"]["std"]:
+            break
+        std_without, j, reduced, h = best
+        steps.append({"step": "heldout", "effect": chosen[j][0].name, "removed": True,
+                      "reason": (f"the held-out residual std without it ({std_without:.4g} rad) is below "
+                                 f"the one with it ({heldout['after']['std']:.4g} rad)")})
+        del chosen[j], chosen_trials[j]
+        cur = reduced
+        after = residual_stats(cur, full) if chosen else before
+        heldout = h if h is not None else _heldout(cur, base_fit, ctx, full, heldout_blocks)
+        kept_bic = {}
+    if not chosen:
+        cur, after = base_fit, before
     alternatives = _alternatives(cur, chosen, chosen_trials, all_candidates, ctx, margin)
     se, cov = _intervals(cur, ctx, with_cov=True)
     lows = [b[0] for b in cur.model.bounds(ctx)]
@@ -1548,6 +1578,7 @@ def select_effects(
                                        and cur.x[j] + _Z90 * se[j] >= highs[j])
             for j in range(sl.start, sl.stop)))
     for fe, (e, *_rest) in zip(fitted_effects, chosen):
+        fe.text = e.describe(fe.params)
         fe.caveat = e.caveat(ctx)
         fe.separated_by = e.separated_by
     _merge_confounded(fitted_effects, [c[0] for c in chosen], cur, cov, ctx)
@@ -1575,7 +1606,7 @@ def select_effects(
 def _fmt(e: FittedEffect) -> str:
     if e.merged_with:  # its separate values mean nothing on this motion: not printed
         return f"{e.name} (merged with {', '.join(e.merged_with)})"
-    main = ", ".join(f"{k} {v:.3g}" for k, v in e.params.items())
+    main = e.text or ", ".join(f"{k} {v:.3g}" for k, v in e.params.items())
     return f"{e.name} ({main})"
 
 
