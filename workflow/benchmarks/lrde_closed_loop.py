@@ -62,7 +62,7 @@ EFFECTS = ("none", "dead_band", "missed_count")
 PERIODIC_SD = 0.05  # step: per-cycle stroke and bias standard deviations of a repeating motion
 
 
-def simulate_log(rng, gains, effect, n_cycles):
+def simulate_log(rng, gains, effect, n_cycles, command=True):
     """``(df, meta, truth)`` of one draw (truth: fine-channel values and what was drawn)."""
     kp, ki = GAINS[gains]
     amplitude = rng.uniform(1.0, 3.0) * STEP
@@ -98,12 +98,14 @@ def simulate_log(rng, gains, effect, n_cycles):
     first = int(np.flatnonzero(cycle == whole[0])[0])
     shape = theta[first:first + len(whole) * per].reshape(len(whole), per).mean(axis=0)
     out = pd.DataFrame({"t": t - t[0], "coarse": df["counts"].to_numpy()[keep],
-                        "fine": df["truth_counts"].to_numpy()[keep]})
+                        "fine": df["truth_counts"].to_numpy()[keep],
+                        "reference": df["reference"].to_numpy()[keep]})
     meta = {"log_id": "closed_loop_draw", "channels": [
         {"name": "coarse", "role": "measured", "joint": 1, "unit": "counts",
          "storage": "counts", "step": STEP},
         {"name": "fine", "role": "truth", "joint": 1, "unit": "counts", "storage": "counts",
-         "step": FINE}]}
+         "step": FINE}] + ([{"name": "reference", "role": "command", "joint": 1, "unit": "rad",
+                             "storage": "float", "step": None}] if command else [])}
     truth = {"A12_true": float(stroke.mean()), "A12_avg_true": float(np.ptp(shape)),
              "a_plus_b": float(np.mean(a_cyc + mid)),
              "stroke_sd_steps": float(stroke.std() / STEP), "bias_sd_steps": float(
@@ -113,9 +115,9 @@ def simulate_log(rng, gains, effect, n_cycles):
     return out, meta, truth
 
 
-def one_draw(gains, effect, n_cycles, seed, settings, threads):
+def one_draw(gains, effect, n_cycles, seed, settings, threads, command=True):
     rng = np.random.default_rng(seed)
-    df, meta, truth = simulate_log(rng, gains, effect, n_cycles)
+    df, meta, truth = simulate_log(rng, gains, effect, n_cycles, command)
     # The machine's speed beside the stage: a 5M-iteration Python loop, timed just before.
     ref = time.perf_counter()
     [0 for _ in range(5_000_000)]
@@ -125,6 +127,7 @@ def one_draw(gains, effect, n_cycles, seed, settings, threads):
     wall = time.perf_counter() - started
     centre = block["centre_count"]
     row = {"gains": gains, "effect": effect, "cycles": n_cycles, "seed": seed, **truth,
+           "command": bool(command),
            "E_b_true": truth["a_plus_b"] - (centre + 0.5) * STEP,
            "chosen": block["model"]["chosen"],
            "trusted": all(v["trusted"] for v in block["trust"].values()),
@@ -178,9 +181,12 @@ def main(argv=None):
     ap.add_argument("--shard", default="0/1", metavar="K/N",
                     help="run the draws whose running index is K modulo N")
     ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--motion-models", nargs="+", default=["[]", "[2]", "[3]", "fourier4", "fourier6"],
-                    help="lrde.motion_models for these logs (YAML items; the measured rows used "
-                         "the default, config.yaml's candidates plus the Fourier series)")
+    ap.add_argument("--motion-models", nargs="+", default=None,
+                    help="lrde.motion_models for these logs (YAML items; default config.yaml's "
+                         "candidates)")
+    ap.add_argument("--no-command", action="store_true",
+                    help="do not declare the reference as a command channel (the loop "
+                         "structures are then not offered)")
     ap.add_argument("--out", default=str(ROOT / "results" / "benchmarks"))
     ap.add_argument("--from-draws", nargs="+", default=None, metavar="CSV",
                     help="summarise these draws instead of running any")
@@ -196,7 +202,8 @@ def main(argv=None):
             ap.error(f"--shard {args.shard}: K must be in 0..N-1")
         settings = dict(yaml.safe_load((ROOT / "config.yaml").read_text())["lrde"])
         settings.pop("seed")
-        settings["motion_models"] = [yaml.safe_load(m) for m in args.motion_models]
+        if args.motion_models is not None:
+            settings["motion_models"] = [yaml.safe_load(m) for m in args.motion_models]
         jobs = [(g, e, c, args.seed + 100_000 * EFFECTS.index(e) + 10_000 * list(GAINS).index(g)
                  + 1000 * c + i)
                 for i in range(args.first_draw, args.draws) for c in args.cycles for g in args.gains
@@ -207,7 +214,7 @@ def main(argv=None):
         for j, job in enumerate(jobs):
             if j % n != k:
                 continue
-            rows.append(one_draw(*job, settings, args.threads))
+            rows.append(one_draw(*job, settings, args.threads, not args.no_command))
             r = rows[-1]
             print(f"{r['gains']} {r['effect']} {r['cycles']} cyc seed {r['seed']}: "
                   f"{r['chosen']} trusted={r['trusted']} A12 cover={r['A12_cover']} "

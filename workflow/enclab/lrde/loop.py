@@ -407,7 +407,8 @@ def compare_loop_models(t, counts, reference, step, comparison, structures=tuple
     Same folds (every other cycle of ``comparison``), same unit (the held-out cycle), same
     score (plug-in predictive density of a point fit with an eighth of a sample's time blur)
     as :func:`enclab.lrde.compare.compare_effect_models`, whose chosen model is the one to
-    beat. A structure replaces it when its held-out gain over it exceeds ``min_z`` standard
+    beat (the log's first cycle left out of every model's score: the loop's starting
+    transient is seen only by a fold that trains on it). A structure replaces it when its held-out gain over it exceeds ``min_z`` standard
     errors and no fold is predicted worse by more than ``fold_se`` of that fold's standard
     errors; a structure with more taps replaces a simpler passing one only by the same rule
     against it. Returns ``models`` (per structure: ``label, delta_elpd, delta_se, z,
@@ -439,7 +440,14 @@ def compare_loop_models(t, counts, reference, step, comparison, structures=tuple
             totals[label].append(float(lp.sum()))
     pick = comparison["chosen"]
     base = comparison["heldout"][pick]
-    units[pick], totals[pick] = base["units"], base["totals"]
+    units[pick] = list(base["units"])
+    # The log's first cycle is left out of every model's held-out score: there the loop's
+    # state at the start of the log (the transient p^j) is known only to a fold that trains
+    # on it, and the other fold would be scored on a term it could not see.
+    first = next(f for f, (_, test) in enumerate(folds) if test[0])
+    for label in units:
+        units[label][first] = units[label][first][1:]
+        totals[label] = [float(u.sum()) for u in units[label]]
 
     def score(a, b):
         diffs = [x[:min(x.size, y.size)] - y[:min(x.size, y.size)]
