@@ -10,13 +10,13 @@ controller's integrators), ``z = p = exp(-dt / tau)`` and, with derivative actio
 it is strictly proper (the sample ``j`` depends on errors before ``j`` only). In partial
 fractions
 
-``theta_j / step = w_2 I2_j + w_1 I1_j + w_p L_j + sum_k v_k e_{j-1-k}
+``theta_j / step = w_2 I2_j + w_1 I1_j + w_p L_j + sum_{k < taps} v_k e_{j-1-k}
 + w_r j / n + w_t p^j + const``,
 
 with ``I1 = sum_{i<j} e_i``, ``I2`` its running sum, ``L_j = sum_{i<j} p^{j-1-i} e_i`` and
 ``e`` in steps; ``const``, the ramp ``j / n`` and ``p^j`` are the homogeneous responses (the
 state at the start of the log and the disturbance). For a given ``p`` the angle is linear in
-the coefficients. ``loop-pi`` has no tap, ``loop-pid`` one (``k = 1``: the derivative's pole
+the coefficients. ``loop-pi`` has no tap, ``loop-pid`` one (``e_{j-1}``: the derivative's pole
 at 0); the held-out comparison picks between them and against the periodic models.
 
 The readings factorise causally (``theta_j`` depends on readings before ``j`` only), so the
@@ -135,8 +135,8 @@ class _Columns:
             coef, *_ = np.linalg.lstsq(base, col, rcond=None)
             col = col - base @ coef
             fixed.append(col / max(np.sqrt(np.mean(col ** 2)), 1e-12))
-        for k in range(1, taps + 1):
-            fixed.append(np.concatenate((np.zeros(k), self.ed[:-k])))
+        for k in range(taps):  # e_{j-1-k}: a pole at 0 (derivative action) and delays
+            fixed.append(np.concatenate((np.zeros(k), self.ed[:self.n - k])))
         self.fixed = np.column_stack(fixed)  # ramp, I2, I1, taps
         self.j = np.arange(n, dtype=float)
 
