@@ -26,7 +26,13 @@ on held-out cycles, :func:`enclab.lrde.motion.motion_model`: lists of harmonic o
 all of :data:`enclab.lrde.effects.EFFECTS`), ``effect_pairs`` (also try the winner plus each
 other passing term, default True), ``trust_z`` (threshold of the predictive check, default -4),
 ``local_z`` (threshold of the localized check, default -5),
-see :func:`enclab.lrde.compare.compare_effect_models`.
+see :func:`enclab.lrde.compare.compare_effect_models`; ``loop_models`` (loop structures
+offered when the log declares a channel with role ``"command"`` on the measured joint, default
+all of :data:`enclab.lrde.loop.STRUCTURES`; ``[]`` offers none), see
+:func:`enclab.lrde.loop.compare_loop_models`. When a loop structure beats the periodic pick
+on the held-out cycles, its posterior (:func:`enclab.lrde.loop.fit_loop`) gives the reported
+estimates and ``after``; the periodic comparison's ``model`` entry moves to
+``model.periodic`` and the loop's scores are under ``model.loop``.
 
 The paper's sinusoid is fitted first (``before``); when the comparison chooses a model with
 an added term, that model is fitted the same way and its posterior gives the reported
