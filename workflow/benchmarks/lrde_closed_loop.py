@@ -9,6 +9,10 @@ axis        values
 gains       ``nominal`` (kp 800, ki 3000) and ``soft`` (kp 400, ki 1500), kd 0
 effect      ``none``, ``dead_band`` (width U(0.05, 0.2) step, in the loop), ``missed_count``
             (one count lost at U(0.25, 0.75) of the log, in the loop)
+command     the reference declared as a ``command`` channel (the loop structures of
+            :mod:`enclab.lrde.loop` offered), or not (``--no-command``: the periodic models
+            alone; rows recorded before this column existed ran so, with ``fourier4`` and
+            ``fourier6`` among the candidates)
 ==========  ====================================================================
 
 and, drawn per log, the encoder offset ``a ~ U(0, step)``, the reference amplitude
@@ -150,9 +154,15 @@ def one_draw(gains, effect, n_cycles, seed, settings, threads, command=True):
 
 def summarise(draws: pd.DataFrame) -> pd.DataFrame:
     rows = []
-    for (cycles, gains, effect), g in draws.groupby(["cycles", "gains", "effect"]):
+    draws = draws.copy()
+    # Draws recorded before the command column existed ran without a command channel.
+    draws["command"] = (draws["command"] if "command" in draws else pd.Series(
+        False, index=draws.index)).fillna(False).astype(bool)
+    for (cycles, command, gains, effect), g in draws.groupby(
+            ["cycles", "command", "gains", "effect"]):
         described = g[g["described"]]
-        rows.append({"cycles": cycles, "gains": gains, "effect": effect, "n": len(g),
+        rows.append({"cycles": cycles, "command": command, "gains": gains, "effect": effect,
+                     "n": len(g),
                      "A12_cover": g["A12_cover"].mean(), "E_b_cover": g["E_b_cover"].mean(),
                      "A12_avg_cover": g["A12_avg_cover"].mean(),
                      "A12_bias_steps": ((g["A12_median"] - g["A12_true"]) / STEP).mean(),
@@ -195,7 +205,11 @@ def main(argv=None):
     out.mkdir(parents=True, exist_ok=True)
     if args.from_draws:
         draws = pd.concat([pd.read_csv(p) for p in args.from_draws], ignore_index=True)
-        draws = draws.drop_duplicates(["cycles", "gains", "effect", "seed"], keep="last")
+        if "command" not in draws:
+            draws["command"] = False
+        draws["command"] = draws["command"].fillna(False).astype(bool)
+        draws = draws.drop_duplicates(["cycles", "command", "gains", "effect", "seed"],
+                                      keep="last")
     else:
         k, n = (int(x) for x in args.shard.split("/"))
         if not 0 <= k < n:

@@ -413,9 +413,11 @@ def compare_loop_models(t, counts, reference, step, comparison, structures=tuple
     as :func:`enclab.lrde.compare.compare_effect_models`, whose chosen model is the one to
     beat (the log's first cycle left out of every model's score: the loop's starting
     transient is seen only by a fold that trains on it). A structure replaces it when its held-out gain over it exceeds ``min_z`` standard
-    errors and no fold is predicted worse by more than ``fold_se`` of that fold's standard
-    errors; a structure with more taps replaces a simpler passing one only by the same rule
-    against it. Returns ``models`` (per structure: ``label, delta_elpd, delta_se, z,
+    errors, no fold is predicted worse by more than ``fold_se`` of that fold's standard
+    errors and its full-log BIC (log-likelihood under the same time blur, a parameter
+    costing ``ln N``) is lower; a structure with more taps replaces a simpler passing one
+    only by the same rule against it. Returns ``models`` (per structure: ``label,
+    delta_elpd, delta_se, z, delta_bic,
     delta_elpd_halves``), ``chosen`` (label or None), ``fits`` (label -> whole-log point fit)
     and, for a chosen structure, ``check`` (:func:`predictive_check`, ``trusted`` when
     ``z >= trust_z``).
@@ -453,6 +455,18 @@ def compare_loop_models(t, counts, reference, step, comparison, structures=tuple
         units[label][first] = units[label][first][1:]
         totals[label] = [float(u.sum()) for u in units[label]]
 
+    # Full-log log-likelihood under the same time blur, and parameter counts, for the BIC.
+    blurred = {pick: float(comparison["full_fits"][pick]["log_lik_blurred"])}
+    n_params = {pick: int(np.size(comparison["full_fits"][pick]["x"]))}
+    for label in structures:
+        cols = _Columns(error_steps(counts, reference, step), full[label]["taps"])
+        blurred[label] = float(_log_lik_rows(full[label]["x"], cols, counts, time_blur=0.125)[0])
+        n_params[label] = int(np.size(full[label]["x"]))
+
+    def delta_bic(a, b):
+        return (2.0 * (blurred[a] - blurred[b])
+                - (n_params[a] - n_params[b]) * np.log(counts.size))
+
     def score(a, b):
         diffs = [x[:min(x.size, y.size)] - y[:min(x.size, y.size)]
                  for x, y in zip(units[a], units[b])]
@@ -461,7 +475,8 @@ def compare_loop_models(t, counts, reference, step, comparison, structures=tuple
         delta = float(sum(gains))
         se = lrde_compare._sum_se(np.concatenate(diffs))
         passed = bool(se > 0 and delta / se > min_z
-                      and lrde_compare._no_fold_worse(gains, ses, fold_se))
+                      and lrde_compare._no_fold_worse(gains, ses, fold_se)
+                      and delta_bic(a, b) > 0)
         return delta, se, gains, passed
 
     models, chosen = [], None
@@ -472,15 +487,15 @@ def compare_loop_models(t, counts, reference, step, comparison, structures=tuple
                        "elpd_per_cycle": float(sum(totals[label]) / max(n_units, 1)),
                        "delta_elpd": delta, "delta_se": se,
                        "z": delta / se if se > 0 else None, "delta_elpd_halves": gains,
-                       "passed": passed})
+                       "delta_bic": float(delta_bic(label, pick)), "passed": passed})
         if passed and (chosen is None or score(label, chosen)[3]):
             chosen = label
     out = {"models": models, "chosen": chosen, "fits": full,
            "rule": (f"a loop structure replaces the periodic pick when its held-out gain over "
-                    f"it exceeds {min_z:g} standard errors and it predicts no fold worse by "
-                    f"more than {fold_se:g} of that fold's standard errors (the periodic "
-                    "comparison's folds, units and time blur); more taps only by the same "
-                    "rule against fewer")}
+                    f"it exceeds {min_z:g} standard errors, it predicts no fold worse by "
+                    f"more than {fold_se:g} of that fold's standard errors and its full-log "
+                    "delta BIC over it is positive (the periodic comparison's folds, units "
+                    "and time blur); more taps only by the same rule against fewer")}
     if chosen is not None:
         check = predictive_check(full[chosen], counts, reference,
                                  np.random.default_rng(seed))
