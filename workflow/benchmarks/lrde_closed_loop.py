@@ -9,7 +9,7 @@ axis        values
 gains       ``nominal`` (kp 800, ki 3000) and ``soft`` (kp 400, ki 1500), kd 0
 effect      ``none``, ``dead_band`` (width U(0.05, 0.2) step, in the loop), ``missed_count``
             (one count lost at U(0.25, 0.75) of the log, in the loop)
-command     the reference declared as a ``command`` channel (the loop structures of
+channel     the reference declared as a ``command`` channel (the loop structures of
             :mod:`enclab.lrde.loop` offered), or not (``--no-command``: the periodic models
             alone; rows recorded before this column existed ran so, with ``fourier4`` and
             ``fourier6`` among the candidates)
@@ -131,7 +131,7 @@ def one_draw(gains, effect, n_cycles, seed, settings, threads, command=True):
     wall = time.perf_counter() - started
     centre = block["centre_count"]
     row = {"gains": gains, "effect": effect, "cycles": n_cycles, "seed": seed, **truth,
-           "command": bool(command),
+           "command_channel": bool(command),
            "E_b_true": truth["a_plus_b"] - (centre + 0.5) * STEP,
            "chosen": block["model"]["chosen"],
            "trusted": all(v["trusted"] for v in block["trust"].values()),
@@ -155,13 +155,14 @@ def one_draw(gains, effect, n_cycles, seed, settings, threads, command=True):
 def summarise(draws: pd.DataFrame) -> pd.DataFrame:
     rows = []
     draws = draws.copy()
-    # Draws recorded before the command column existed ran without a command channel.
-    draws["command"] = (draws["command"] if "command" in draws else pd.Series(
-        False, index=draws.index)).fillna(False).astype(bool)
+    # Draws recorded before the command_channel column existed ran without one.
+    draws["command_channel"] = (draws["command_channel"] if "command_channel" in draws
+                                else pd.Series(False, index=draws.index)).fillna(False).astype(bool)
     for (cycles, command, gains, effect), g in draws.groupby(
-            ["cycles", "command", "gains", "effect"]):
+            ["cycles", "command_channel", "gains", "effect"]):
         described = g[g["described"]]
-        rows.append({"cycles": cycles, "command": command, "gains": gains, "effect": effect,
+        rows.append({"cycles": cycles, "command_channel": command, "gains": gains,
+                     "effect": effect,
                      "n": len(g),
                      "A12_cover": g["A12_cover"].mean(), "E_b_cover": g["E_b_cover"].mean(),
                      "A12_avg_cover": g["A12_avg_cover"].mean(),
@@ -205,10 +206,10 @@ def main(argv=None):
     out.mkdir(parents=True, exist_ok=True)
     if args.from_draws:
         draws = pd.concat([pd.read_csv(p) for p in args.from_draws], ignore_index=True)
-        if "command" not in draws:
-            draws["command"] = False
-        draws["command"] = draws["command"].fillna(False).astype(bool)
-        draws = draws.drop_duplicates(["cycles", "command", "gains", "effect", "seed"],
+        if "command_channel" not in draws:
+            draws["command_channel"] = False
+        draws["command_channel"] = draws["command_channel"].fillna(False).astype(bool)
+        draws = draws.drop_duplicates(["cycles", "command_channel", "gains", "effect", "seed"],
                                       keep="last")
     else:
         k, n = (int(x) for x in args.shard.split("/"))
