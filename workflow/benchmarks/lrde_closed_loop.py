@@ -9,6 +9,10 @@ axis        values
 gains       ``nominal`` (kp 800, ki 3000) and ``soft`` (kp 400, ki 1500), kd 0
 effect      ``none``, ``dead_band`` (width U(0.05, 0.2) step, in the loop), ``missed_count``
             (one count lost at U(0.25, 0.75) of the log, in the loop)
+channel     the reference declared as a ``command`` channel (the loop structures of
+            :mod:`enclab.lrde.loop` offered), or not (``--no-command``: the periodic models
+            alone; rows recorded before this column existed ran so, with ``fourier4`` and
+            ``fourier6`` among the candidates)
 ==========  ====================================================================
 
 and, drawn per log, the encoder offset ``a ~ U(0, step)``, the reference amplitude
@@ -62,7 +66,7 @@ EFFECTS = ("none", "dead_band", "missed_count")
 PERIODIC_SD = 0.05  # step: per-cycle stroke and bias standard deviations of a repeating motion
 
 
-def simulate_log(rng, gains, effect, n_cycles):
+def simulate_log(rng, gains, effect, n_cycles, command=True):
     """``(df, meta, truth)`` of one draw (truth: fine-channel values and what was drawn)."""
     kp, ki = GAINS[gains]
     amplitude = rng.uniform(1.0, 3.0) * STEP
@@ -98,12 +102,14 @@ def simulate_log(rng, gains, effect, n_cycles):
     first = int(np.flatnonzero(cycle == whole[0])[0])
     shape = theta[first:first + len(whole) * per].reshape(len(whole), per).mean(axis=0)
     out = pd.DataFrame({"t": t - t[0], "coarse": df["counts"].to_numpy()[keep],
-                        "fine": df["truth_counts"].to_numpy()[keep]})
+                        "fine": df["truth_counts"].to_numpy()[keep],
+                        "reference": df["reference"].to_numpy()[keep]})
     meta = {"log_id": "closed_loop_draw", "channels": [
         {"name": "coarse", "role": "measured", "joint": 1, "unit": "counts",
          "storage": "counts", "step": STEP},
         {"name": "fine", "role": "truth", "joint": 1, "unit": "counts", "storage": "counts",
-         "step": FINE}]}
+         "step": FINE}] + ([{"name": "reference", "role": "command", "joint": 1, "unit": "rad",
+                             "storage": "float", "step": None}] if command else [])}
     truth = {"A12_true": float(stroke.mean()), "A12_avg_true": float(np.ptp(shape)),
              "a_plus_b": float(np.mean(a_cyc + mid)),
              "stroke_sd_steps": float(stroke.std() / STEP), "bias_sd_steps": float(
@@ -113,9 +119,9 @@ def simulate_log(rng, gains, effect, n_cycles):
     return out, meta, truth
 
 
-def one_draw(gains, effect, n_cycles, seed, settings, threads):
+def one_draw(gains, effect, n_cycles, seed, settings, threads, command=True):
     rng = np.random.default_rng(seed)
-    df, meta, truth = simulate_log(rng, gains, effect, n_cycles)
+    df, meta, truth = simulate_log(rng, gains, effect, n_cycles, command)
     # The machine's speed beside the stage: a 5M-iteration Python loop, timed just before.
     ref = time.perf_counter()
     [0 for _ in range(5_000_000)]
@@ -125,6 +131,7 @@ def one_draw(gains, effect, n_cycles, seed, settings, threads):
     wall = time.perf_counter() - started
     centre = block["centre_count"]
     row = {"gains": gains, "effect": effect, "cycles": n_cycles, "seed": seed, **truth,
+           "command_channel": bool(command),
            "E_b_true": truth["a_plus_b"] - (centre + 0.5) * STEP,
            "chosen": block["model"]["chosen"],
            "trusted": all(v["trusted"] for v in block["trust"].values()),
@@ -147,9 +154,16 @@ def one_draw(gains, effect, n_cycles, seed, settings, threads):
 
 def summarise(draws: pd.DataFrame) -> pd.DataFrame:
     rows = []
-    for (cycles, gains, effect), g in draws.groupby(["cycles", "gains", "effect"]):
+    draws = draws.copy()
+    # Draws recorded before the command_channel column existed ran without one.
+    draws["command_channel"] = (draws["command_channel"] if "command_channel" in draws
+                                else pd.Series(False, index=draws.index)).fillna(False).astype(bool)
+    for (cycles, command, gains, effect), g in draws.groupby(
+            ["cycles", "command_channel", "gains", "effect"]):
         described = g[g["described"]]
-        rows.append({"cycles": cycles, "gains": gains, "effect": effect, "n": len(g),
+        rows.append({"cycles": cycles, "command_channel": command, "gains": gains,
+                     "effect": effect,
+                     "n": len(g),
                      "A12_cover": g["A12_cover"].mean(), "E_b_cover": g["E_b_cover"].mean(),
                      "A12_avg_cover": g["A12_avg_cover"].mean(),
                      "A12_bias_steps": ((g["A12_median"] - g["A12_true"]) / STEP).mean(),
@@ -178,9 +192,12 @@ def main(argv=None):
     ap.add_argument("--shard", default="0/1", metavar="K/N",
                     help="run the draws whose running index is K modulo N")
     ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--motion-models", nargs="+", default=["[]", "[2]", "[3]", "fourier4", "fourier6"],
-                    help="lrde.motion_models for these logs (YAML items; the measured rows used "
-                         "the default, config.yaml's candidates plus the Fourier series)")
+    ap.add_argument("--motion-models", nargs="+", default=None,
+                    help="lrde.motion_models for these logs (YAML items; default config.yaml's "
+                         "candidates)")
+    ap.add_argument("--no-command", action="store_true",
+                    help="do not declare the reference as a command channel (the loop "
+                         "structures are then not offered)")
     ap.add_argument("--out", default=str(ROOT / "results" / "benchmarks"))
     ap.add_argument("--from-draws", nargs="+", default=None, metavar="CSV",
                     help="summarise these draws instead of running any")
@@ -189,14 +206,19 @@ def main(argv=None):
     out.mkdir(parents=True, exist_ok=True)
     if args.from_draws:
         draws = pd.concat([pd.read_csv(p) for p in args.from_draws], ignore_index=True)
-        draws = draws.drop_duplicates(["cycles", "gains", "effect", "seed"], keep="last")
+        if "command_channel" not in draws:
+            draws["command_channel"] = False
+        draws["command_channel"] = draws["command_channel"].fillna(False).astype(bool)
+        draws = draws.drop_duplicates(["cycles", "command_channel", "gains", "effect", "seed"],
+                                      keep="last")
     else:
         k, n = (int(x) for x in args.shard.split("/"))
         if not 0 <= k < n:
             ap.error(f"--shard {args.shard}: K must be in 0..N-1")
         settings = dict(yaml.safe_load((ROOT / "config.yaml").read_text())["lrde"])
         settings.pop("seed")
-        settings["motion_models"] = [yaml.safe_load(m) for m in args.motion_models]
+        if args.motion_models is not None:
+            settings["motion_models"] = [yaml.safe_load(m) for m in args.motion_models]
         jobs = [(g, e, c, args.seed + 100_000 * EFFECTS.index(e) + 10_000 * list(GAINS).index(g)
                  + 1000 * c + i)
                 for i in range(args.first_draw, args.draws) for c in args.cycles for g in args.gains
@@ -207,7 +229,7 @@ def main(argv=None):
         for j, job in enumerate(jobs):
             if j % n != k:
                 continue
-            rows.append(one_draw(*job, settings, args.threads))
+            rows.append(one_draw(*job, settings, args.threads, not args.no_command))
             r = rows[-1]
             print(f"{r['gains']} {r['effect']} {r['cycles']} cyc seed {r['seed']}: "
                   f"{r['chosen']} trusted={r['trusted']} A12 cover={r['A12_cover']} "

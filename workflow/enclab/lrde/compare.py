@@ -828,4 +828,10 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
                      f"more than {-local_z:g} standard deviations below what the fit expects, "
                      "or the dwells of one count end early or late, or successive dwells of a "
                      f"count do so together, by more than {-local_z:g} standard deviations"),
-            "full_fits": full, "trace_detail": trace_detail}
+            "full_fits": full, "trace_detail": trace_detail,
+            # Per model, the held-out log predictive density per test cycle and per fold, and
+            # the cycle of every sample: other models (a loop driven by logged signals,
+            # enclab.lrde.loop) are scored on the same folds and units.
+            "heldout": {label: {"units": res["units"], "totals": res["totals"]}
+                        for label, (_, res) in results.items()},
+            "cycle": cycle}

@@ -26,7 +26,13 @@ on held-out cycles, :func:`enclab.lrde.motion.motion_model`: lists of harmonic o
 all of :data:`enclab.lrde.effects.EFFECTS`), ``effect_pairs`` (also try the winner plus each
 other passing term, default True), ``trust_z`` (threshold of the predictive check, default -4),
 ``local_z`` (threshold of the localized check, default -5),
-see :func:`enclab.lrde.compare.compare_effect_models`.
+see :func:`enclab.lrde.compare.compare_effect_models`; ``loop_models`` (loop structures
+offered when the log declares a channel with role ``"command"`` on the measured joint, default
+all of :data:`enclab.lrde.loop.STRUCTURES`; ``[]`` offers none), see
+:func:`enclab.lrde.loop.compare_loop_models`. When a loop structure beats the periodic pick
+on the held-out cycles, its posterior (:func:`enclab.lrde.loop.fit_loop`) gives the reported
+estimates and ``after``; the periodic comparison's ``model`` entry moves to
+``model.periodic`` and the loop's scores are under ``model.loop``.
 
 The paper's sinusoid is fitted first (``before``); when the comparison chooses a model with
 an added term, that model is fitted the same way and its posterior gives the reported
@@ -49,6 +55,7 @@ import pandas as pd
 from enclab.core import parallel
 from enclab.lrde import compare, dwell, fit, plots, report
 from enclab.lrde import effects as lrde_effects
+from enclab.lrde import loop as lrde_loop
 from enclab.lrde import motion as lrde_motion
 
 __all__ = ["select_channels", "analyse_lrde_log"]
@@ -64,7 +71,7 @@ DEFAULT_MOTION_MODELS = ([], [2], [3])
 _KNOWN_SETTINGS = {"channel", "requantize", "use_truth", "rest_position", "f_hz", "n_ensembles",
                    "n_walkers", "n_steps", "max_steps", "n_burn", "ppc_draws", "sigma_range_steps",
                    "sigma_prior", "motion_models", "effects", "effect_pairs", "trust_z",
-                   "local_z"}
+                   "local_z", "loop_models"}
 
 
 def _angle(df: pd.DataFrame, channel: dict) -> np.ndarray:
@@ -129,6 +136,33 @@ def _alternative_kwargs(t, counts, step, comparison, added, common, settings):
                                 sigma_range=settings.get("sigma_range_steps"),
                                 sigma_prior=settings.get("sigma_prior", "uniform"))
         out.append({"harmonics": harmonics, "effects": effects, "start": point["x"], **common})
+    return out
+
+
+def select_command(df: pd.DataFrame, meta: dict, info: dict):
+    """The commanded or reference angle (rad) of the measured channel's joint: the first
+    channel with role ``"command"`` on that joint (on any joint when the measured channel has
+    none), or None when the log declares none."""
+    channels = meta.get("channels") or []
+    measured = [ch for ch in channels if ch.get("name") == info.get("measured")]
+    joint = measured[0].get("joint") if measured else None
+    commands = [ch for ch in channels if ch.get("role") == "command"
+                and (joint is None or ch.get("joint") == joint)]
+    return _angle(df, commands[0]) if commands else None
+
+
+def _loop_model_block(model_block: dict, loop_cmp: dict) -> dict:
+    """The ``model`` entry when a loop structure replaces the periodic pick: the loop's
+    label, comparison and check; the periodic comparison's entry under ``periodic``."""
+    out = {"chosen": loop_cmp["chosen"], "harmonics": [], "effects": [], "signature": {},
+           "indistinguishable": [], "not_ruled_out": [], "delta_bic": None,
+           "models": model_block.get("models", []), "loop": loop_cmp["models"],
+           "check": dict(loop_cmp["check"]), "rule": loop_cmp["rule"],
+           "n_cycles": model_block.get("n_cycles"), "params": {},
+           "note": (f"the angle is the logged tracking error through the {loop_cmp['chosen']} "
+                    "filter (enclab.lrde.loop); the periodic models' pick was "
+                    f"{model_block.get('chosen')}"),
+           "periodic": {k: v for k, v in model_block.items() if k != "models"}}
     return out
 
 
@@ -269,7 +303,8 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
     check_count_changes(t, counts, where)
     f_hz = settings.get("f_hz")
     root = np.random.SeedSequence(seed)
-    fit_seed, ppc_seed, compare_seed, after_seed, alternatives_seed = root.spawn(5)
+    # A sixth child for the loop model: the first five are those of a five-way spawn.
+    fit_seed, ppc_seed, compare_seed, after_seed, alternatives_seed, loop_seed = root.spawn(6)
     try:
         cycles = dwell.cycle_table(counts, t, step, f_hz=f_hz)
         summary = dwell.dwell_summary(cycles)
@@ -314,6 +349,28 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
         raise ValueError(f"{where}: {err}") from err
     result = fits[0]
     chosen_fit = fits[-1] if after_kw is not None else None
+    # With a declared command or reference channel, the loop structures (the angle as the
+    # logged error through a low-order filter) enter the held-out comparison against the
+    # periodic pick; a winning structure's posterior gives the reported estimates.
+    command = select_command(df, meta, info)
+    structures = list(settings.get("loop_models", list(lrde_loop.STRUCTURES)))
+    loop_cmp = loop_fit = None
+    if command is not None and comparison is not None and structures:
+        compare_loop_seed, fit_loop_seed = loop_seed.spawn(2)
+        try:
+            loop_cmp = lrde_loop.compare_loop_models(
+                t, counts, command, step, comparison, structures,
+                trust_z=float(settings.get("trust_z", compare.DEFAULT_TRUST_Z)),
+                seed=compare_loop_seed, threads=threads)
+        except ValueError as err:
+            raise ValueError(f"{where}: {err}") from err
+        if loop_cmp["chosen"] is not None:
+            sampler = _sampler_settings(settings)
+            loop_fit = lrde_loop.fit_loop(
+                t, counts, command, step, fit_loop_seed, loop_cmp["chosen"],
+                start=loop_cmp["fits"][loop_cmp["chosen"]],
+                n_ensembles=sampler["n_ensembles"], max_steps=max(sampler["max_steps"], 250),
+                truth=common["truth"], truth_step=common["truth_step"])
     # Models the held-out comparison cannot tell from the pick (or, when it keeps the
     # sinusoid, does not rule out): their posteriors are pooled with the pick's (equal
     # weights), so the reported intervals do not hang on the pick.
@@ -348,6 +405,12 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
                                         for e in model_block["effects"]}
         if chosen_fit is not None:
             result = chosen_fit
+    if loop_fit is not None:
+        model_block = _loop_model_block(model_block, loop_cmp)
+        _log.info("emcee fit of %s: %.1f s wall", loop_fit.label, loop_fit.wall_time_s)
+        result, averaged = loop_fit, None
+    elif loop_cmp is not None:
+        model_block["loop"] = loop_cmp["models"]
     if reference is not None:
         model_block["reference"] = report.reference_block(reference, model_block, added)
     reported = averaged if averaged is not None else result
@@ -362,19 +425,24 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
     residuals = report.effect_residuals_block(model_block)
     if residuals is not None:
         block["residuals"] = residuals
-    predictive = plots.posterior_predictive_dwell(result, t, ppc_seed,
-                                                  n_draws=int(settings.get("ppc_draws", 40)))
+    if loop_fit is not None:
+        predictive = lrde_loop.posterior_predictive_dwell(
+            loop_fit, t, counts, command, ppc_seed, n_draws=int(settings.get("ppc_draws", 40)))
+    else:
+        predictive = plots.posterior_predictive_dwell(
+            result, t, ppc_seed, n_draws=int(settings.get("ppc_draws", 40)))
     truth_periods = None
     if truth is not None and block["offset_a"] is not None and block["centre_count"] is not None:
         truth_periods = plots.truth_bias_deviation(
             t, truth, block["f_hz"]["median"], step, block["offset_a"]["median"],
             block["centre_count"])
-    figures = {"corner": plots.corner_plot(result),
+    figures = {"corner": (plots.loop_corner_plot(loop_fit) if loop_fit is not None
+                          else plots.corner_plot(result)),
                "dwell_ppc": plots.dwell_ppc_plot(cycles, predictive),
                "bias_cycles": plots.bias_cycles_plot(
                    cycles, step, truth_periods,
                    fitted={"E_b": block["E_b"], "label": model_block.get("chosen", "sinusoid")}),
-               "misfit": plots.misfit_plot(None if comparison is None
+               "misfit": plots.misfit_plot(None if comparison is None or loop_fit is not None
                                            else comparison["trace_detail"])}
     report_md = report.report_markdown(block, meta.get("log_id"))
     return block, figures, report_md, cycles

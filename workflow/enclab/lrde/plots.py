@@ -19,7 +19,7 @@ from matplotlib.figure import Figure
 from enclab.lrde import dwell, model
 
 __all__ = ["corner_plot", "posterior_predictive_dwell", "dwell_ppc_plot", "closed_loop_plot",
-           "bias_cycles_plot", "truth_bias_deviation", "misfit_plot"]
+           "bias_cycles_plot", "truth_bias_deviation", "misfit_plot", "loop_corner_plot"]
 
 _DEG = 180.0 / np.pi
 
@@ -50,6 +50,19 @@ def corner_plot(fit, truths: dict | None = None) -> Figure:
     fig = Figure(figsize=(8, 8))
     corner.corner(data, labels=labels, quantiles=[0.05, 0.5, 0.95], truths=truth_values,
                   fig=fig, show_titles=True, title_fmt=".4g")
+    return fig
+
+
+def loop_corner_plot(fit) -> Figure:
+    """Corner plot of a loop fit (:mod:`enclab.lrde.loop`): ``A12``, ``E_b``, ``sigma``
+    (deg) and the plant's discrete pole ``p``."""
+    names = list(fit.loop_names)
+    data = np.column_stack((fit.stroke * _DEG, fit.samples[:, 1] * _DEG,
+                            fit.samples[:, 4] * _DEG, fit.loop_samples[:, names.index("p")]))
+    fig = Figure(figsize=(7, 7))
+    corner.corner(data, labels=[r"$A_{12}$ [deg]", r"$E_b$ [deg]", r"$\sigma$ [deg]",
+                                r"pole $p$"], quantiles=[0.05, 0.5, 0.95], fig=fig,
+                  show_titles=True, title_fmt=".4g")
     return fig
 
 

@@ -372,7 +372,9 @@ def effect_residuals_block(model_block: dict) -> dict | None:
     models = model_block.get("models") or []
     if not models:
         return None
-    chosen = next(m for m in models if m["label"] == model_block["chosen"])
+    # A loop structure (enclab.lrde.loop) that replaced the periodic pick is in "loop".
+    chosen = next(m for m in models + list(model_block.get("loop") or [])
+                  if m["label"] == model_block["chosen"])
     effects = []
     if model_block["effects"] or model_block["harmonics"]:
         params = model_block.get("params") or {}

@@ -1,0 +1,531 @@
+"""A motion driven by the logged loop signals: the shaft angle as the output of a low-order
+linear filter of the logged tracking error (paper 002's servo loop, Fig. 5).
+
+Inside a loop the controller acts on ``e_j = r_j - step * c_j`` (reference and reading, both
+logged), so for a linear controller ``C`` and plant ``P`` the angle is
+``theta = P C e`` plus the response to a constant disturbance and to the state at the start of
+the log. For a PI or PID controller driving a DC motor ``tau theta'' + theta' = g (u + d)``
+held by a zero-order hold, ``P C`` has poles ``z = 1`` (twice: the plant's and the
+controller's integrators), ``z = p = exp(-dt / tau)`` and, with derivative action, ``z = 0``;
+it is strictly proper (the sample ``j`` depends on errors before ``j`` only). In partial
+fractions
+
+``theta_j / step = w_2 I2_j + w_1 I1_j + w_p L_j + sum_{k < taps} v_k e_{j-1-k}
++ w_r j / n + w_t p^j + const``,
+
+with ``I1 = sum_{i<j} e_i``, ``I2`` its running sum, ``L_j = sum_{i<j} p^{j-1-i} e_i`` and
+``e`` in steps; ``const``, the ramp ``j / n`` and ``p^j`` are the homogeneous responses (the
+state at the start of the log and the disturbance). For a given ``p`` the angle is linear in
+the coefficients. ``loop-pi`` has no tap, ``loop-pid`` one (``e_{j-1}``: the derivative's pole
+at 0); the held-out comparison picks between them and against the periodic models.
+
+The readings factorise causally (``theta_j`` depends on readings before ``j`` only), so the
+reading likelihood of :mod:`enclab.lrde.fit` applies to this ``theta`` unchanged:
+``count_j = floor(theta_j / step + a / step + noise)``, with the constant absorbed into the
+offset. What a free periodic shape cannot see, the motion inside the extreme count, follows
+here from the logged error.
+
+Reported quantities per posterior sample, with the definitions for a motion that is not a
+sinusoid (docs/low-resolution-encoder.md), over the cycles of the reference (upward
+crossings of its mean): ``A12`` the mean over cycles of ``max theta - min theta``, ``a_eq``
+the mean over cycles of ``a + (max theta + min theta) / 2``, ``E_b = a_eq - (m + 1/2) step``.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import emcee
+import numpy as np
+from scipy.optimize import minimize
+from scipy.signal import lfilter
+
+from enclab.lrde import effects as lrde_effects
+from enclab.lrde import fit as lrde_fit
+
+__all__ = ["STRUCTURES", "LoopFilter", "loop_structure", "error_steps", "reference_cycles",
+           "loop_columns", "point_fit", "fit_loop", "LoopFitResult", "compare_loop_models",
+           "predictive_check", "posterior_predictive_dwell"]
+
+#: Taps of each structure (derivative action adds a pole at 0: one tap).
+STRUCTURES = {"loop-pi": 0, "loop-pid": 1}
+_P_BOUNDS = (0.02, 0.995)  # the plant's discrete pole exp(-dt / tau)
+_P_GRID = np.exp(-1.0 / np.array([0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0]))  # tau / dt
+_LOG_S_BOUNDS = lrde_fit._LOG_SIGMA_BOUNDS
+_SMOOTH_LOG_S = np.log10(0.05)
+_W_BOUND = 1e3  # the coefficients' prior box (steps per unit column): wide, only a box
+
+
+class LoopFilter:
+    """A loop structure: the filter from the logged error to the angle (see the module)."""
+
+    def __init__(self, taps: int = 0) -> None:
+        if isinstance(taps, bool) or not isinstance(taps, (int, np.integer)) or taps < 0:
+            raise ValueError(f"taps must be a non-negative integer, got {taps!r}")
+        self.taps = int(taps)
+
+    @property
+    def label(self) -> str:
+        names = {v: k for k, v in STRUCTURES.items()}
+        return names.get(self.taps, f"loop-taps{self.taps}")
+
+    @property
+    def n_coefficients(self) -> int:
+        """Linear coefficients: ramp, transient, I2, I1, lag and the taps."""
+        return 5 + self.taps
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, LoopFilter) and other.taps == self.taps
+
+    def __hash__(self) -> int:
+        return hash(("LoopFilter", self.taps))
+
+    def __repr__(self) -> str:
+        return f"LoopFilter({self.label!r})"
+
+
+def loop_structure(spec) -> LoopFilter:
+    """A structure from its label (``loop-pi``, ``loop-pid``) or itself."""
+    if isinstance(spec, LoopFilter):
+        return spec
+    if spec in STRUCTURES:
+        return LoopFilter(STRUCTURES[spec])
+    raise ValueError(f"unknown loop structure {spec!r}: one of {sorted(STRUCTURES)}")
+
+
+def error_steps(counts, reference, step) -> np.ndarray:
+    """The loop's error ``reference / step - counts`` in steps."""
+    r = np.asarray(reference, dtype=float)
+    c = np.asarray(counts, dtype=float)
+    if r.shape != c.shape or not np.all(np.isfinite(r)):
+        raise ValueError(f"reference must be finite with the shape of counts {c.shape}, "
+                         f"got {r.shape}")
+    return r / step - c
+
+
+def reference_cycles(reference) -> np.ndarray:
+    """Sample indices starting the reference's cycles: its upward crossings of its mean
+    (at least two, else a ValueError)."""
+    r = np.asarray(reference, dtype=float)
+    r = r - 0.5 * (r.max() + r.min())
+    up = np.flatnonzero((r[:-1] < 0) & (r[1:] >= 0)) + 1
+    if up.size < 3:
+        raise ValueError("the reference crosses its mean upward fewer than three times: "
+                         "fewer than two whole cycles")
+    return up
+
+
+class _Columns:
+    """The design of one log: the columns that do not depend on ``p`` are built once."""
+
+    def __init__(self, e, taps):
+        e = np.asarray(e, dtype=float)
+        n = e.size
+        self.n = n
+        self.ed = np.concatenate(([0.0], e[:-1]))  # e_{j-1}: strictly causal
+        i1 = lfilter([1.0], [1.0, -1.0], self.ed)
+        i2 = lfilter([1.0], [1.0, -1.0], i1)
+        ramp = np.arange(n) / n - 0.5  # centred: nearly uncorrelated with the offset
+        base = np.column_stack((np.ones(n), ramp))
+        fixed = [ramp]
+        # I2 and I1 grow over a long log; their parts along 1 and the ramp belong to the
+        # homogeneous terms, so they are projected out and the rest scaled to unit RMS
+        # (a linear reparametrisation of the same span, well conditioned).
+        for col in (i2, i1):
+            coef, *_ = np.linalg.lstsq(base, col, rcond=None)
+            col = col - base @ coef
+            fixed.append(col / max(np.sqrt(np.mean(col ** 2)), 1e-12))
+        for k in range(taps):  # e_{j-1-k}: a pole at 0 (derivative action) and delays
+            fixed.append(np.concatenate((np.zeros(k), self.ed[:self.n - k])))
+        self.fixed = np.column_stack(fixed)  # ramp, I2, I1, taps
+        self.j = np.arange(n, dtype=float)
+
+    def lag(self, p):
+        """``(L, p^j)`` for a pole ``p``."""
+        # p^j only where it exceeds 1e-18 (the rest is 0 in double precision's sums): a
+        # power of every sample costs most of a likelihood evaluation.
+        trans = np.zeros(self.n)
+        k = min(self.n, int(np.ceil(np.log(1e-18) / np.log(p))) + 1) if p > 0 else 1
+        trans[:k] = p ** self.j[:k]
+        return lfilter([1.0], [1.0, -p], self.ed), trans
+
+    def motion(self, x):
+        """``z - a`` in steps for internal rows ``x`` (a0, log s, p, w_ramp, w_I2, w_I1,
+        taps..., w_L, w_t): shape (rows, n)."""
+        x = np.atleast_2d(x)
+        nf = self.fixed.shape[1]
+        out = x[:, 3:3 + nf] @ self.fixed.T
+        for i, row in enumerate(x):
+            lag, trans = self.lag(row[2])
+            out[i] += row[3 + nf] * lag + row[4 + nf] * trans
+        return out
+
+
+def _bounds(taps):
+    n_w = 5 + taps
+    return np.array([[-50.0, 50.0], list(_LOG_S_BOUNDS), list(_P_BOUNDS)]
+                    + [[-_W_BOUND, _W_BOUND]] * n_w)
+
+
+def _log_lik_rows(x, cols, counts, mask=None, time_blur=0.0, pointwise=False):
+    """Reading log-likelihood of internal rows (sums over ``mask``, or per sample)."""
+    x = np.atleast_2d(x)
+    z = cols.motion(x) + x[:, 0:1]
+    k = np.asarray(counts, dtype=float)
+    s = 10.0 ** x[:, 1:2]
+    if time_blur > 0:
+        # As the periodic models' held-out score: timing blurred by a fraction of a sample,
+        # i.e. the jitter widened by the motion's speed times that fraction.
+        speed = np.gradient(z, axis=1)
+        s = np.sqrt(s * s + (speed * time_blur) ** 2)
+    if mask is not None:
+        z, k = z[:, mask], k[mask]
+        s = s[:, mask] if s.shape[1] > 1 else s
+    lower = (k - z) / s
+    upper = (k + 1.0 - z) / s
+    if pointwise:
+        return lrde_effects._log_interval_full(lower, upper)
+    return lrde_effects._log_interval_rows(lower, upper)
+
+
+def _log_post(x, cols, counts, bounds, mask=None):
+    x = np.atleast_2d(x)
+    inside = np.all((x > bounds[:, 0]) & (x < bounds[:, 1]), axis=1)
+    out = np.full(x.shape[0], -np.inf)
+    if np.any(inside):
+        # Uniform prior in sigma (the sampled column is log10 sigma): Jacobian ln10 * log s.
+        out[inside] = (_log_lik_rows(x[inside], cols, counts, mask)
+                       + np.log(10.0) * x[inside, 1])
+    return out
+
+
+def _start(cols, counts, taps, mask):
+    """Least squares of the readings' centres on the columns at each ``p`` of a grid; the
+    ``p`` whose smoothed likelihood is best."""
+    best = None
+    y = np.asarray(counts, dtype=float) + 0.5
+    m = slice(None) if mask is None else mask
+    for p in _P_GRID:
+        lag, trans = cols.lag(p)
+        design = np.column_stack((np.ones(cols.n), cols.fixed, lag, trans))
+        coef, *_ = np.linalg.lstsq(design[m], y[m], rcond=None)
+        x = np.concatenate(([coef[0], _SMOOTH_LOG_S, p], coef[1:]))
+        value = _log_lik_rows(x, cols, counts, mask)[0]
+        if best is None or value > best[0]:
+            best = (value, x)
+    return best[1]
+
+
+def point_fit(t, counts, reference, step, structure="loop-pi", mask=None, max_evals=3000,
+              cols=None) -> dict:
+    """Maximum of the log-posterior of a loop structure (L-BFGS-B, first with the jitter
+    held at 0.05 step, a smoothed likelihood, then free).
+
+    ``mask`` restricts the likelihood to some samples (a held-out fold's training cycles);
+    the columns always run over the whole log (the logged error is known everywhere).
+    Returns ``x`` (internal row), ``log_post``, ``structure``, ``taps``, ``step``.
+    """
+    s = loop_structure(structure)
+    counts = np.asarray(counts)
+    cols = cols or _Columns(error_steps(counts, reference, step), s.taps)
+    bounds = _bounds(s.taps)
+    margin = 1e-6 * np.ptp(bounds, axis=1)
+    lo, hi = bounds[:, 0] + margin, bounds[:, 1] - margin
+    x = np.clip(_start(cols, counts, s.taps, mask), lo, hi)
+    free = np.arange(x.size) != 1
+
+    def smoothed(y):
+        value = _log_lik_rows(np.insert(y, 1, _SMOOTH_LOG_S), cols, counts, mask)[0]
+        return -value if np.isfinite(value) else 1e300
+
+    def objective(y):
+        value = _log_post(y, cols, counts, bounds, mask)[0]
+        return -value if np.isfinite(value) else 1e300
+
+    res = minimize(smoothed, x[free], method="L-BFGS-B", bounds=list(zip(lo[free], hi[free])),
+                   options={"maxfun": int(max_evals)})
+    x = np.insert(res.x, 1, _SMOOTH_LOG_S)
+    res = minimize(objective, x, method="L-BFGS-B", bounds=list(zip(lo, hi)),
+                   options={"maxfun": int(max_evals)})
+    return {"x": res.x, "log_post": -float(res.fun), "structure": s.label, "taps": s.taps,
+            "step": float(step), "hess_inv": res.hess_inv.todense()}
+
+
+def _cycle_extremes(z, starts):
+    """Per row, the max and min of ``z`` over each whole cycle ``[starts[i], starts[i+1])``."""
+    seg = z[:, starts[0]:starts[-1]]
+    idx = starts[:-1] - starts[0]
+    return np.maximum.reduceat(seg, idx, axis=1), np.minimum.reduceat(seg, idx, axis=1)
+
+
+@dataclass
+class LoopFitResult(lrde_fit.FitResult):
+    """A :class:`enclab.lrde.fit.FitResult` of a loop structure: ``samples`` holds the
+    reported columns (``A12`` per-cycle stroke, ``E_b``, the reference's ``f_hz``, ``phase``
+    0, ``sigma``) per posterior sample, ``loop_samples`` the internal rows of the filter."""
+
+    structure: str = "loop-pi"
+    loop_samples: np.ndarray | None = None
+    loop_names: tuple = ()
+
+    @property
+    def label(self) -> str:
+        return self.structure
+
+    def take(self, rows) -> "LoopFitResult":
+        out = super().take(rows)
+        out.loop_samples = None if self.loop_samples is None else self.loop_samples[rows]
+        return out
+
+
+def _names(taps):
+    return (("a0", "log_sigma", "p", "w_ramp", "w_I2", "w_I1")
+            + tuple(f"w_tap{k}" for k in range(1, taps + 1)) + ("w_lag", "w_transient"))
+
+
+def fit_loop(t, counts, reference, step, seed, structure="loop-pi", start=None, n_ensembles=4,
+             n_walkers=32, n_steps=250, n_burn=400, max_steps=1000, truth=None,
+             truth_step=None, centre_count=None) -> LoopFitResult:
+    """Posterior of a loop structure (emcee, independent ensembles as
+    :func:`enclab.lrde.fit.fit_sinusoid`) and the paper's quantities per sample.
+
+    32 walkers per ensemble: with 16 (twice the 8 parameters of ``loop-pi``) the
+    differential-evolution moves mixed too slowly for R-hat <= 1.01 within 1000 steps on
+    20-cycle closed-loop logs; with 32 they converged within 250-500.
+
+    ``truth`` (rad, a fine channel) gives the bias ``b``: the mean over the reference's
+    cycles of its turning points' midpoint, widened by half its rounding step; ``a = a_eq - b``.
+    """
+    started = time.perf_counter()
+    t = np.asarray(t, dtype=float)
+    counts = lrde_fit._check_int_counts(counts, t.size)
+    s = loop_structure(structure)
+    cols = _Columns(error_steps(counts, reference, step), s.taps)
+    if start is None:
+        start = point_fit(t, counts, reference, step, s, cols=cols)
+    x0, cov = np.asarray(start["x"], dtype=float), np.asarray(start["hess_inv"])
+    bounds = _bounds(s.taps)
+    names = _names(s.taps)
+    ndim = len(names)
+    n_walkers = max(int(n_walkers), 2 * ndim + (2 * ndim) % 2)
+    root = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    # Start dispersion: a thousandth of the point fit's inverse-Hessian widths (L-BFGS's own
+    # estimate, which overstates the widths of this hard-edged likelihood by orders of
+    # magnitude: started at a tenth of them, walkers stray where the jitter is large and do
+    # not return within the chain); the differential-evolution moves widen the ensembles
+    # during the burn-in.
+    scale = 1e-3 * np.sqrt(np.clip(np.diag(cov), 1e-12, None))
+    starts, randoms = [], []
+    margin = 1e-9 * np.ptp(bounds, axis=1)
+    for child in root.spawn(n_ensembles):
+        rng = np.random.default_rng(child)
+        p0 = x0 + scale * rng.standard_normal((n_walkers, ndim))
+        starts.append(np.clip(p0, bounds[:, 0] + margin, bounds[:, 1] - margin))
+        randoms.append(np.random.RandomState(int(rng.integers(2**32))))
+    sampler = emcee.EnsembleSampler(
+        n_ensembles * n_walkers, ndim, _log_post, args=(cols, counts, bounds), vectorize=True,
+        moves=[(lrde_fit._EnsemblesMove(m, randoms), w) for m, w in lrde_fit._MOVES["de"]()])
+    sampler.random_state = np.random.RandomState(
+        int(root.spawn(1)[0].generate_state(1)[0])).get_state()
+    sampler.run_mcmc(np.concatenate(starts), n_burn + n_steps, progress=False)
+    kept = n_steps
+    while True:
+        chain = sampler.get_chain(discard=n_burn)
+        internal = chain.reshape(kept, n_ensembles, n_walkers, ndim).transpose(1, 0, 2, 3)
+        tau, rhat, ess = lrde_fit._chain_diagnostics(internal, names)
+        converged = bool(max(rhat.values()) <= 1.01 and min(ess.values()) >= 1000)
+        if converged or kept >= max_steps:
+            break
+        more = min(n_steps, max_steps - kept)
+        sampler.run_mcmc(None, more, progress=False)
+        kept += more
+    rows = internal.reshape(-1, ndim)
+    cycles = reference_cycles(reference)
+    f_hz = float((cycles.size - 1) / (t[cycles[-1]] - t[cycles[0]]))
+    init = lrde_fit.initial_guess(t, counts, step)
+    centre = float(init["centre_count"] if centre_count is None else centre_count)
+    stroke = np.empty(rows.shape[0])
+    a_eq = np.empty(rows.shape[0])
+    for i in range(0, rows.shape[0], 256):
+        z = cols.motion(rows[i:i + 256]) + rows[i:i + 256, 0:1]
+        top, bottom = _cycle_extremes(z, cycles)
+        stroke[i:i + 256] = step * (top - bottom).mean(axis=1)
+        a_eq[i:i + 256] = step * (0.5 * (top + bottom)).mean(axis=1)
+    e_b = a_eq - (centre + 0.5) * step
+    sigma = step * 10.0 ** rows[:, 1]
+    samples = np.column_stack((stroke, e_b, np.full(rows.shape[0], f_hz),
+                               np.zeros(rows.shape[0]), sigma))
+    q = lrde_fit._quantiles
+    summary = {"A12": q(stroke), "E_b": q(e_b), "a_eq": q(a_eq), "f_hz": q(samples[:, 2]),
+               "phase": q(samples[:, 3]), "sigma": q(sigma)}
+    offset_a = bias_b = b_draws = None
+    reason = lrde_fit._UNIDENTIFIED
+    if truth is not None:
+        truth = np.asarray(truth, dtype=float)
+        top, bottom = _cycle_extremes(truth[None, :], cycles)
+        b_hat = float((0.5 * (top + bottom)).mean())
+        half = 0.5 * float(truth_step) if truth_step else 0.0
+        rng = np.random.default_rng(root.spawn(2)[1])
+        b_draws = b_hat + half * rng.uniform(-1.0, 1.0, rows.shape[0])
+        bias_b, offset_a = q(b_draws), q(a_eq - b_draws)
+        summary["bias_b"], summary["offset_a"] = bias_b, offset_a
+        reason = ("bias b from the truth channel (mean over the reference's cycles of the "
+                  "midpoint of its turning points, widened by half its step), offset "
+                  "a = a_eq - b")
+    return LoopFitResult(
+        param_names=lrde_fit.PARAM_NAMES, samples=samples, chains=None, a_eq_samples=a_eq,
+        summary=summary, offset_a=offset_a, bias_b=bias_b, reason=reason, tau=tau, rhat=rhat,
+        ess=ess, converged=converged, step=float(step), centre_count=centre,
+        steps_pp=int(init["steps_pp"]), t_ref=float(0.5 * (t[0] + t[-1])),
+        init={k: v for k, v in init.items() if k != "cycles"},
+        acceptance=float(np.mean(sampler.acceptance_fraction)),
+        wall_time_s=time.perf_counter() - started,
+        settings={"n_ensembles": n_ensembles, "n_walkers": n_walkers, "n_steps": kept,
+                  "n_burn": n_burn, "structure": s.label, "harmonics": [], "effects": []},
+        b_samples=b_draws, stroke_samples=stroke, midpoint_samples=np.zeros(rows.shape[0]),
+        structure=s.label, loop_samples=rows, loop_names=names)
+
+
+def predictive_check(m, counts, reference, rng, n_sim=20) -> dict:
+    """The point fit's log-likelihood of the readings against that of ``n_sim`` readings
+    simulated from it, given the logged error (the readings' causal factorisation: each
+    reading is drawn from the angle the logged errors before it set). Returns ``observed``,
+    ``sim_mean``, ``sim_sd`` and ``z``."""
+    counts = np.asarray(counts)
+    cols = _Columns(error_steps(counts, reference, m["step"]), m["taps"])
+    x = np.asarray(m["x"], dtype=float)[None, :]
+    z = cols.motion(x)[0] + x[0, 0]
+    s = 10.0 ** x[0, 1]
+    observed = float(_log_lik_rows(x, cols, counts)[0])
+    scores = np.array([_log_lik_rows(x, cols, np.floor(z + s * rng.standard_normal(z.size)))[0]
+                       for _ in range(n_sim)])
+    sd = float(scores.std(ddof=1))
+    return {"observed": observed, "sim_mean": float(scores.mean()), "sim_sd": sd,
+            "z": float((observed - scores.mean()) / sd) if sd > 0 else 0.0}
+
+
+def compare_loop_models(t, counts, reference, step, comparison, structures=tuple(STRUCTURES),
+                        min_z=2.0, fold_se=2.0, trust_z=-4.0, seed=0, threads=1) -> dict:
+    """The loop structures in the held-out comparison of the periodic models.
+
+    Same folds (every other cycle of ``comparison``), same unit (the held-out cycle), same
+    score (plug-in predictive density of a point fit with an eighth of a sample's time blur)
+    as :func:`enclab.lrde.compare.compare_effect_models`, whose chosen model is the one to
+    beat (the log's first cycle left out of every model's score: the loop's starting
+    transient is seen only by a fold that trains on it). A structure replaces it when its held-out gain over it exceeds ``min_z`` standard
+    errors, no fold is predicted worse by more than ``fold_se`` of that fold's standard
+    errors and its full-log BIC (log-likelihood under the same time blur, a parameter
+    costing ``ln N``) is lower; a structure with more taps replaces a simpler passing one
+    only by the same rule against it. Returns ``models`` (per structure: ``label,
+    delta_elpd, delta_se, z, delta_bic,
+    delta_elpd_halves``), ``chosen`` (label or None), ``fits`` (label -> whole-log point fit)
+    and, for a chosen structure, ``check`` (:func:`predictive_check`, ``trusted`` when
+    ``z >= trust_z``).
+    """
+    from enclab.core import parallel
+    from enclab.lrde import compare as lrde_compare
+
+    t = np.asarray(t, dtype=float)
+    counts = np.asarray(counts)
+    cycle = np.asarray(comparison["cycle"])
+    odd = (cycle % 2).astype(bool)
+    folds = [(~odd, odd), (odd, ~odd)]
+    jobs = [(t, counts, reference, step, s, train) for s in structures for train, _ in folds]
+    jobs += [(t, counts, reference, step, s, None) for s in structures]
+    fits = parallel.map_forked(_point_job, jobs, threads)
+    fold_fits = fits[:2 * len(structures)]
+    full = dict(zip(structures, fits[2 * len(structures):]))
+    units, totals = {}, {}
+    for i, label in enumerate(structures):
+        units[label], totals[label] = [], []
+        for (_, test), m in zip(folds, fold_fits[2 * i:2 * i + 2]):
+            cols = _Columns(error_steps(counts, reference, step), m["taps"])
+            lp = _log_lik_rows(m["x"], cols, counts, time_blur=0.125, pointwise=True)[0][test]
+            _, unit = np.unique(cycle[test], return_inverse=True)
+            units[label].append(np.bincount(unit, weights=lp))
+            totals[label].append(float(lp.sum()))
+    pick = comparison["chosen"]
+    base = comparison["heldout"][pick]
+    units[pick] = list(base["units"])
+    # The log's first cycle is left out of every model's held-out score: there the loop's
+    # state at the start of the log (the transient p^j) is known only to a fold that trains
+    # on it, and the other fold would be scored on a term it could not see.
+    first = next(f for f, (_, test) in enumerate(folds) if test[0])
+    for label in units:
+        units[label][first] = units[label][first][1:]
+        totals[label] = [float(u.sum()) for u in units[label]]
+
+    # Full-log log-likelihood under the same time blur, and parameter counts, for the BIC.
+    blurred = {pick: float(comparison["full_fits"][pick]["log_lik_blurred"])}
+    n_params = {pick: int(np.size(comparison["full_fits"][pick]["x"]))}
+    for label in structures:
+        cols = _Columns(error_steps(counts, reference, step), full[label]["taps"])
+        blurred[label] = float(_log_lik_rows(full[label]["x"], cols, counts, time_blur=0.125)[0])
+        n_params[label] = int(np.size(full[label]["x"]))
+
+    def delta_bic(a, b):
+        return (2.0 * (blurred[a] - blurred[b])
+                - (n_params[a] - n_params[b]) * np.log(counts.size))
+
+    def score(a, b):
+        diffs = [x[:min(x.size, y.size)] - y[:min(x.size, y.size)]
+                 for x, y in zip(units[a], units[b])]
+        gains = [float(x - y) for x, y in zip(totals[a], totals[b])]
+        ses = [lrde_compare._sum_se(d) for d in diffs]
+        delta = float(sum(gains))
+        se = lrde_compare._sum_se(np.concatenate(diffs))
+        passed = bool(se > 0 and delta / se > min_z
+                      and lrde_compare._no_fold_worse(gains, ses, fold_se)
+                      and delta_bic(a, b) > 0)
+        return delta, se, gains, passed
+
+    models, chosen = [], None
+    for label in structures:
+        delta, se, gains, passed = score(label, pick)
+        n_units = sum(u.size for u in units[label])
+        models.append({"label": label, "over": pick,
+                       "elpd_per_cycle": float(sum(totals[label]) / max(n_units, 1)),
+                       "delta_elpd": delta, "delta_se": se,
+                       "z": delta / se if se > 0 else None, "delta_elpd_halves": gains,
+                       "delta_bic": float(delta_bic(label, pick)), "passed": passed})
+        if passed and (chosen is None or score(label, chosen)[3]):
+            chosen = label
+    out = {"models": models, "chosen": chosen, "fits": full,
+           "rule": (f"a loop structure replaces the periodic pick when its held-out gain over "
+                    f"it exceeds {min_z:g} standard errors, it predicts no fold worse by "
+                    f"more than {fold_se:g} of that fold's standard errors and its full-log "
+                    "delta BIC over it is positive (the periodic comparison's folds, units "
+                    "and time blur); more taps only by the same rule against fewer")}
+    if chosen is not None:
+        check = predictive_check(full[chosen], counts, reference,
+                                 np.random.default_rng(seed))
+        out["check"] = check | {"trusted": bool(check["z"] >= trust_z), "threshold_z": trust_z,
+                                "localized": False, "local_z": None, "trace": {}}
+    return out
+
+
+def _point_job(t, counts, reference, step, structure, train):
+    return point_fit(t, counts, reference, step, structure, mask=train)
+
+
+def posterior_predictive_dwell(result, t, counts, reference, seed, n_draws=40):
+    """Per-cycle dwell half-widths of readings simulated from posterior draws of a loop fit,
+    each reading drawn from the angle the logged errors set (as
+    :func:`enclab.lrde.plots.posterior_predictive_dwell`)."""
+    import pandas as pd
+
+    from enclab.lrde import dwell
+
+    rng = np.random.default_rng(seed)
+    cols = _Columns(error_steps(counts, reference, result.step), STRUCTURES.get(
+        result.structure, 0))
+    idx = rng.choice(result.loop_samples.shape[0], size=int(n_draws), replace=False)
+    frames = []
+    for d, i in enumerate(idx):
+        x = result.loop_samples[i]
+        z = cols.motion(x)[0] + x[0] + 10.0 ** x[1] * rng.standard_normal(cols.n)
+        table = dwell.cycle_table(np.floor(z).astype(np.int64), t, result.step,
+                                  f_hz=float(result.samples[i, 2]))
+        frames.append(pd.DataFrame({"draw": d, "cycle": table["cycle"], "w1": table["w1"],
+                                    "w2": table["w2"], "steps_pp": table["steps_pp"]}))
+    return pd.concat(frames, ignore_index=True)
