@@ -200,8 +200,8 @@ DEFAULT_TRUST_Z = -4.0
 DEFAULT_LOCAL_Z = -5.0
 
 #: Default candidates of :func:`compare_effect_models`: ``(harmonics, effects)`` pairs.
-DEFAULT_CANDIDATES = (((), ()), ((2,), ()), ((3,), ()), ((), ("hysteresis",)),
-                      ((), ("drift",)), ((), ("count_jump",)), ((), ("time_jitter",)))
+DEFAULT_CANDIDATES = (((), ()), ((2,), ()), ((3,), ())) + tuple(
+    ((), (name,)) for name in lrde_effects.EFFECTS)
 
 
 def alternative_terms(comparison: dict) -> list:
@@ -236,7 +236,7 @@ def _predict(m, t, counts, t_train, counts_train, prev=None, prev_train=None):
     bracket the jump take it before any of them with equal probability (a mixture; the
     per-sample values follow its most probable component, shifted to add up to its total).
     """
-    if "count_jump" not in m["effects"]:
+    if not lrde_effects.offsets_counts(m["effects"]):
         lp = _pointwise(m, t, counts, prev_counts=prev)
         return float(lp.sum()), lp
     index, delta, _, offsets = lrde_effects.jump_posterior(
@@ -300,7 +300,7 @@ def _trace_covariates(m, t, prev):
     tenth = np.minimum((u * 10).astype(np.int64), 9)
     time_words = [f"in the {_TENTHS[k]} tenth of the log ({t[0] + (t[-1] - t[0]) * k / 10:.3g} "
                   f"to {t[0] + (t[-1] - t[0]) * (k + 1) / 10:.3g} s)" for k in range(10)]
-    drift_col = lrde_effects._columns(m["harmonics"], m["effects"]).get("drift")
+    drift_col = lrde_effects.parameter_column(m["harmonics"], m["effects"], "bends_phase")
     motion, speed = lrde_effects._motion_and_speed(np.atleast_2d(m["x"]), t, m["t_ref"],
                                                    tuple(m["harmonics"]), drift_col)
     motion, speed = motion[0], speed[0]
@@ -451,7 +451,7 @@ def misfit_trace(m, t, counts, min_var=1.0, floor=-50.0, local_z=DEFAULT_LOCAL_Z
     bad) and ``local_z``.
     """
     offsets = 0
-    if "count_jump" in m["effects"]:
+    if lrde_effects.offsets_counts(m["effects"]):
         *_, offsets = lrde_effects.jump_posterior(m["x"], t, counts, m["step"], m["centre"],
                                                   m["t_ref"], m["harmonics"], m["effects"])
     c = np.asarray(counts) - offsets
@@ -527,7 +527,7 @@ def predictive_check(m, t, counts, rng, n_sim=20) -> dict:
     observed = score(counts)
     kw = _si_params(m)
     offsets = 0
-    if "count_jump" in m["effects"]:
+    if lrde_effects.offsets_counts(m["effects"]):
         *_, offsets = lrde_effects.jump_posterior(m["x"], t, counts, m["step"], m["centre"],
                                                   m["t_ref"], m["harmonics"], m["effects"])
     sims = lrde_effects.simulate_counts(rng, t, m["step"], n_rep=n_sim, **kw) + offsets
@@ -718,7 +718,7 @@ def compare_effect_models(t, counts, step, seed, candidates=DEFAULT_CANDIDATES, 
 
     def n_extra(harmonics, effects):
         return (2 * len(harmonics) + len(lrde_effects.effect_param_names(effects))
-                + int("count_jump" in effects))
+                + lrde_effects.n_marginalised(effects))
 
     models = []
     n_cycles = 0

@@ -2,37 +2,10 @@
 
 The paper's model reads ``count = floor(z + e)`` with ``z = a_eq/step + A/step sin(phi)`` and
 ``e`` white Gaussian position noise of ``s`` steps (:mod:`enclab.lrde.fit`). Each effect below
-changes that reading model by one small term with its own signature in the readings:
-
-``hysteresis`` (parameter ``hysteresis``, width ``w`` in steps, SI rad)
-    The reading switches up to ``k`` when ``z + e`` rises through ``k + w/2`` and down to
-    ``k - 1`` when it falls through ``k - w/2``: a dead band of width ``w`` centred on each
-    nominal level (``a_eq`` refers to the band centre). A play of width ``w`` between the
-    motion and the encoder gives the same readings (the encoder shaft lags the motion by
-    ``w/2`` in the direction of travel), so the two physical causes are one effect here.
-    Signature: rising edges late and falling edges early by ``w/2`` each, i.e. every dwell
-    at a turning point lengthened, the mid-stroke dwells unchanged in length but shifted.
-    The state of a relay is its reading, so given the previous reading ``c`` the reading
-    ``k`` has the interval ``[k + w/2, k + 1 + w/2)`` for ``k > c``, ``[k - w/2, k + 1 - w/2)``
-    for ``k < c`` and ``[c - w/2, c + 1 + w/2)`` for ``k = c``; these partition the line, so
-    the likelihood is exact for a relay driven by ``z + e`` (first sample: the stay interval).
-``drift`` (parameter ``drift``, relative frequency change per second ``kappa``, 1/s)
-    ``f(t) = f (1 + kappa (t - t_ref))``, phase ``omega (u + kappa u^2 / 2) + phase`` with
-    ``u = t - t_ref``. Signature: the dwell pattern slides against a fixed-frequency sine,
-    opposite in the two halves of the log. ``kappa`` times the log's duration is the drift over
-    the log.
-``count_jump`` (no sampled parameter)
-    One missed (``-1``) or extra (``+1``) count at an unknown sample: the counts of the shorter
-    of the two segments are offset by ``delta`` from those of the longer one, whose frame
-    ``a_eq`` refers to. The jump index (uniform over the log) and ``delta`` (+-1, equally
-    likely) are marginalised exactly from cumulative sums of the pointwise likelihood.
-    Signature: the reading pattern is shifted by one whole step from a point on.
-``time_jitter`` (parameter ``time_jitter``, standard deviation of the sample times, SI s)
-    Each sample is taken at ``t + eta``, ``eta ~ N(0, sigma_t^2)``: to first order a position
-    noise ``z'(t) eta``, so the noise of sample ``j`` is ``sqrt(s^2 + (z'(t_j) sigma_t)^2)``.
-    Signature: noise proportional to the speed, none at the turning points (unlike the
-    constant position noise ``s``). The second-order term ``z'' eta^2 / 2`` is below
-    ``(omega sigma_t)^2 A / 2`` steps and neglected.
+changes that reading model by one small term with its own signature in the readings. Each
+term is one :class:`Effect` subclass in :data:`REGISTRY`; the likelihood, the fits, the
+comparison and the reports reach a term only through its attributes and methods, so adding a
+term is adding a class (docs/development.md, "Adding an effect").
 
 Harmonic distortion of the motion (``harmonics`` in :func:`enclab.lrde.fit.fit_sinusoid`)
 stays a motion term; any of these effects combine with it and with each other.
@@ -40,6 +13,7 @@ stays a motion term; any of these effects combine with it and with each other.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 
 import numpy as np
 from scipy.special import erfc, log_ndtr, logsumexp
@@ -47,11 +21,260 @@ from scipy.special import erfc, log_ndtr, logsumexp
 from enclab.lrde import model
 from enclab.lrde import motion as lrde_motion
 
-__all__ = ["EFFECTS", "check_effects", "effect_param_names", "effect_bounds", "effect_scales",
-           "pointwise_log_likelihood", "log_likelihood", "jump_posterior", "simulate_counts",
-           "effect_signature", "model_label"]
+__all__ = ["Effect", "Hysteresis", "Drift", "CountJump", "TimeJitter", "REGISTRY", "EFFECTS",
+           "effect", "active", "parameter_column", "offsets_counts",
+           "n_marginalised", "check_effects", "effect_param_names", "effect_bounds",
+           "effect_scales", "pointwise_log_likelihood", "log_likelihood", "jump_posterior",
+           "simulate_counts", "effect_signature", "model_label"]
 
-EFFECTS = ("hysteresis", "drift", "count_jump", "time_jitter")
+# Internal bounds: hysteresis in steps (a dead band above half a step would swallow the
+# narrowest dwell of a 2n-step pattern), time jitter in sample intervals, drift as a total
+# relative change over the fitted log (converted to 1/s with its duration).
+_HYST_MAX = 0.5
+_JITTER_MAX = 1.0
+_DRIFT_MAX = 0.1
+_RELAY_ROWS_VECTOR = 16  # from this many simulated readings on, the relay runs vectorised
+
+
+class Effect:
+    """Base class of an encoder or clock term of the low-resolution reading model.
+
+    A term is one small subclass: its ``name`` (the config's and the reports' word), its one
+    sampled parameter (internal units, uniform prior within :meth:`bounds`, SI per internal
+    unit :meth:`si_scale`, start values of the fits), its ``signature`` (what the readings
+    look like when the term is present and not modelled, one line) and the role it plays in
+    the likelihood (the flags below; the likelihood reads the flags, never the name).
+    ``counterparts`` names the residual-stage effects (:mod:`enclab.residuals.effects`) of
+    the same physics, which declare this term as theirs; ``test`` names the test that checks
+    the term's likelihood against a brute-force simulation (:func:`simulate_counts`).
+
+    Attributes
+    ----------
+    name : str
+        The term's name; also the keyword of :func:`simulate_counts` that sets it (SI).
+    sampled : bool
+        The term has a sampled parameter (named ``name``); False for a term marginalised
+        exactly in :func:`log_likelihood`.
+    bends_phase : bool
+        The parameter (1/s) changes the motion's frequency over the log.
+    blurs_time : bool
+        The parameter (sample intervals) is a standard deviation of the sample times.
+    dead_band : bool
+        The parameter (steps) is the width of a dead band of the reading.
+    offsets_counts : bool
+        The term offsets the counts of one segment of the log by one (a missed count): the
+        likelihood is marginalised over where and which way; it counts as one parameter.
+    stroke_reach : float
+        How much of the stroke (steps) the term can hide at the turning points: it widens
+        the prior of ``A12`` upwards.
+    of_the_reading : bool
+        A property of the reading (compared with the truth channel's findings); False for a
+        term of the motion itself (the frequency's drift).
+    unconfirmed : str or None
+        What the term stands for when the truth channel shows no such effect.
+    unconfirmed_biases : tuple or None
+        ``(quantities, words)``: the estimates that rest on the term being the encoder's.
+    """
+
+    name = "effect"
+    sampled = True
+    bends_phase = False
+    blurs_time = False
+    dead_band = False
+    offsets_counts = False
+    stroke_reach = 0.0
+    of_the_reading = True
+    signature = ""
+    counterparts: tuple = ()
+    unconfirmed = None
+    unconfirmed_biases = None
+    test = ""
+    #: start value of the parameter (internal units)
+    start = 0.0
+
+    def bounds(self, duration: float, dt: float) -> list:
+        """Internal prior bounds ``[lo, hi]`` of the parameter for a log of ``duration`` s
+        sampled every ``dt`` s."""
+        raise NotImplementedError
+
+    def si_scale(self, step: float, dt: float) -> float:
+        """SI value of one internal unit of the parameter."""
+        raise NotImplementedError
+
+    def start_spread(self, duration: float, ratio: float) -> float:
+        """Dispersion of the ensemble's start (internal units, before the common shrink)."""
+        raise NotImplementedError
+
+    def simplex_step(self, duration: float) -> float:
+        """First step of the point fit's simplex (internal units)."""
+        raise NotImplementedError
+
+    def derived(self, summary: Mapping, duration_s: float | None) -> dict:
+        """Extra reported quantities from the fitted parameter's ``{median, q05, q95}``."""
+        return {}
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}()"
+
+
+class Hysteresis(Effect):
+    """Dead band of the reading of width ``w`` (parameter ``hysteresis``, steps; SI rad).
+
+    The reading switches up to ``k`` when ``z + e`` rises through ``k + w/2`` and down to
+    ``k - 1`` when it falls through ``k - w/2``: a dead band of width ``w`` centred on each
+    nominal level (``a_eq`` refers to the band centre). A play of width ``w`` between the
+    motion and the encoder gives the same readings (the encoder shaft lags the motion by
+    ``w/2`` in the direction of travel), so the two physical causes are one effect here, and
+    the residual stage's dead band and play are both this term.
+    Signature: rising edges late and falling edges early by ``w/2`` each, i.e. every dwell
+    at a turning point lengthened, the mid-stroke dwells unchanged in length but shifted.
+    The state of a relay is its reading, so given the previous reading ``c`` the reading
+    ``k`` has the interval ``[k + w/2, k + 1 + w/2)`` for ``k > c``, ``[k - w/2, k + 1 - w/2)``
+    for ``k < c`` and ``[c - w/2, c + 1 + w/2)`` for ``k = c``; these partition the line, so
+    the likelihood is exact for a relay driven by ``z + e`` (first sample: the stay interval).
+    """
+
+    name = "hysteresis"
+    dead_band = True
+    stroke_reach = _HYST_MAX
+    start = 0.02
+    signature = ("switch-up and switch-down levels differ by a width w (dead band of the "
+                 "reading, or a play of the same width before the encoder)")
+    counterparts = ("hysteresis", "backlash")
+    unconfirmed = ("the encoder reads its truth channel without a dead band, so the term stands "
+                   "for the motion (it lingers at its turning points, as a closed loop's does)")
+    unconfirmed_biases = (("A12",), "the truth channel shows no dead band, so the model's "
+                          "hysteresis stands for the motion at its turning points and the "
+                          "fitted motion's stroke is not the shaft's")
+    test = "tests/test_lrde_effects.py::test_hysteresis_transition_probabilities_match_a_relay_simulation"
+
+    def bounds(self, duration, dt):
+        return [0.0, _HYST_MAX]
+
+    def si_scale(self, step, dt):
+        return step
+
+    def start_spread(self, duration, ratio):
+        return 0.01
+
+    def simplex_step(self, duration):
+        return 0.05
+
+
+class Drift(Effect):
+    """Linear drift of the motion's frequency, ``kappa`` (parameter ``drift``, 1/s).
+
+    ``f(t) = f (1 + kappa (t - t_ref))``, phase ``omega (u + kappa u^2 / 2) + phase`` with
+    ``u = t - t_ref``. Signature: the dwell pattern slides against a fixed-frequency sine,
+    opposite in the two halves of the log. ``kappa`` times the log's duration is the drift over
+    the log. A term of the motion, not of the reading: the residual stage, which compares the
+    reading with the truth, has none.
+    """
+
+    name = "drift"
+    bends_phase = True
+    of_the_reading = False
+    signature = "linear drift of the motion frequency over the log"
+    test = "tests/test_lrde_effects.py::test_drift_reading_probabilities_match_simulation"
+
+    def bounds(self, duration, dt):
+        return [-_DRIFT_MAX / duration, _DRIFT_MAX / duration]
+
+    def si_scale(self, step, dt):
+        return 1.0
+
+    def start_spread(self, duration, ratio):
+        return 2e-4 / duration * ratio
+
+    def simplex_step(self, duration):
+        return 0.01 / duration
+
+    def derived(self, summary, duration_s):
+        """``drift_over_log``: the relative frequency change over the log."""
+        if not duration_s:
+            return {}
+        return {"drift_over_log": {k: _num(v * duration_s) for k, v in summary.items()}}
+
+
+class CountJump(Effect):
+    """One missed (``-1``) or extra (``+1``) count at an unknown sample (no sampled parameter).
+
+    The counts of the shorter of the two segments are offset by ``delta`` from those of the
+    longer one, whose frame ``a_eq`` refers to. The jump index (uniform over the log) and
+    ``delta`` (+-1, equally likely) are marginalised exactly from cumulative sums of the
+    pointwise likelihood. Signature: the reading pattern is shifted by one whole step from a
+    point on.
+    """
+
+    name = "count_jump"
+    sampled = False
+    offsets_counts = True
+    signature = "one missed or extra count at an unknown time (a step in the count offset)"
+    counterparts = ("missed_counts",)
+    unconfirmed = ("the truth channel shows no missed count, so the term stands for a step of "
+                   "the motion itself")
+    test = "tests/test_lrde_effects.py::test_count_jump_marginal_matches_simulation_of_a_random_jump"
+
+
+class TimeJitter(Effect):
+    """Jitter of the sample times, standard deviation ``sigma_t`` (parameter ``time_jitter``,
+    sample intervals; SI s).
+
+    Each sample is taken at ``t + eta``, ``eta ~ N(0, sigma_t^2)``: to first order a position
+    noise ``z'(t) eta``, so the noise of sample ``j`` is ``sqrt(s^2 + (z'(t_j) sigma_t)^2)``.
+    Signature: noise proportional to the speed, none at the turning points (unlike the
+    constant position noise ``s``). The second-order term ``z'' eta^2 / 2`` is below
+    ``(omega sigma_t)^2 A / 2`` steps and neglected.
+    """
+
+    name = "time_jitter"
+    blurs_time = True
+    start = 0.05
+    signature = "jitter of the sample times (noise proportional to the speed)"
+    counterparts = ("timestamp_jitter",)
+    unconfirmed = ("the truth channel shows no sample-time jitter, so the term stands for "
+                   "noise of the motion")
+    test = "tests/test_lrde_effects.py::test_time_jitter_reading_probabilities_match_simulation"
+
+    def bounds(self, duration, dt):
+        return [0.0, _JITTER_MAX]
+
+    def si_scale(self, step, dt):
+        return dt
+
+    def start_spread(self, duration, ratio):
+        return 0.02
+
+    def simplex_step(self, duration):
+        return 0.1
+
+
+def _num(value):
+    """JSON-safe float: NaN, infinities and None become None."""
+    if value is None:
+        return None
+    value = float(value)
+    return value if math.isfinite(value) else None
+
+
+#: The registry: every term by name, in the order models list them.
+REGISTRY = {cls.name: cls() for cls in (Hysteresis, Drift, CountJump, TimeJitter)}
+
+#: The names of the registered terms (the config's ``lrde.effects`` enum).
+EFFECTS = tuple(REGISTRY)
+
+
+def effect(name: str) -> Effect:
+    """The registered term called ``name``."""
+    try:
+        return REGISTRY[name]
+    except KeyError:
+        raise ValueError(f"unknown effect {name!r}; known: {EFFECTS}") from None
+
+
+def active(effects) -> list:
+    """The registered terms of a tuple of names (checked, in :data:`EFFECTS` order)."""
+    return [REGISTRY[n] for n in check_effects(effects)]
 
 
 def model_label(harmonics, effects) -> str:
@@ -61,22 +284,6 @@ def model_label(harmonics, effects) -> str:
     motion = lrde_motion.from_harmonics(harmonics)
     terms = ([] if not motion.harmonics else [motion.label]) + list(effects)
     return "+".join(terms) if terms else "sinusoid"
-
-_SIGNATURES = {
-    "hysteresis": "switch-up and switch-down levels differ by a width w (dead band of the "
-                  "reading, or a play of the same width before the encoder)",
-    "drift": "linear drift of the motion frequency over the log",
-    "count_jump": "one missed or extra count at an unknown time (a step in the count offset)",
-    "time_jitter": "jitter of the sample times (noise proportional to the speed)",
-}
-
-# Internal bounds: hysteresis in steps (a dead band above half a step would swallow the
-# narrowest dwell of a 2n-step pattern), time jitter in sample intervals, drift as a total
-# relative change over the fitted log (converted to 1/s with its duration).
-_HYST_MAX = 0.5
-_JITTER_MAX = 1.0
-_DRIFT_MAX = 0.1
-_RELAY_ROWS_VECTOR = 16  # from this many simulated readings on, the relay runs vectorised
 
 
 def check_effects(effects) -> tuple:
@@ -89,35 +296,49 @@ def check_effects(effects) -> tuple:
 
 def effect_signature(name: str) -> str:
     """One-line description of an effect's physical reading and signature."""
-    return _SIGNATURES[name]
+    return effect(name).signature
 
 
 def effect_param_names(effects) -> tuple:
-    """Sampled parameter names of the effects (``count_jump`` has none)."""
-    return tuple(x for x in check_effects(effects) if x != "count_jump")
+    """Sampled parameter names of the effects (a marginalised term has none)."""
+    return tuple(e.name for e in active(effects) if e.sampled)
+
+
+def _sampled(effects) -> list:
+    return [e for e in active(effects) if e.sampled]
 
 
 def effect_bounds(effects, duration, dt) -> list:
     """Internal prior bounds of the effect parameters (uniform priors).
 
     ``hysteresis`` in steps ``(0, 0.5)``, ``drift`` in 1/s within ``+-0.1 / duration``,
-    ``time_jitter`` in sample intervals ``(0, 1)``.
+    ``time_jitter`` in sample intervals ``(0, 1)`` (:meth:`Effect.bounds`).
     """
-    out = []
-    for name in effect_param_names(effects):
-        if name == "hysteresis":
-            out.append([0.0, _HYST_MAX])
-        elif name == "drift":
-            out.append([-_DRIFT_MAX / duration, _DRIFT_MAX / duration])
-        else:
-            out.append([0.0, _JITTER_MAX])
-    return out
+    return [e.bounds(duration, dt) for e in _sampled(effects)]
 
 
 def effect_scales(effects, step, dt) -> list:
     """SI value per internal unit of each effect parameter (rad per step, 1, s per sample)."""
-    return [{"hysteresis": step, "drift": 1.0, "time_jitter": dt}[n]
-            for n in effect_param_names(effects)]
+    return [e.si_scale(step, dt) for e in _sampled(effects)]
+
+
+def parameter_column(harmonics, effects, flag: str):
+    """Column of the parameter rows holding the sampled term with ``flag`` set (an
+    :class:`Effect` attribute such as ``"bends_phase"``), or None."""
+    for name, col in _columns(harmonics, effects).items():
+        if getattr(REGISTRY[name], flag):
+            return col
+    return None
+
+
+def offsets_counts(effects) -> bool:
+    """Whether a term of ``effects`` offsets the counts of a segment (marginalised)."""
+    return any(e.offsets_counts for e in active(effects))
+
+
+def n_marginalised(effects) -> int:
+    """Parameters of ``effects`` marginalised rather than sampled (each counts as one)."""
+    return sum(not e.sampled for e in active(effects))
 
 
 def _phase(p, t, t_ref, drift_col):
@@ -315,11 +536,13 @@ def _previous(counts, prev_counts):
 def _interval_bounds(p, t, counts, centre_count, t_ref, harmonics, effects, offset, time_blur,
                      grid, prev_counts=None):
     """Standardised interval bounds ``(lower, upper)`` of every reading, rows of ``p``."""
-    cols = _columns(harmonics, effects)
+    drift_col = parameter_column(harmonics, effects, "bends_phase")
+    jitter_col = parameter_column(harmonics, effects, "blurs_time")
+    band_col = parameter_column(harmonics, effects, "dead_band")
     t = np.asarray(t, dtype=float)
     k = np.asarray(counts, dtype=float) - offset
-    jitter = "time_jitter" in cols or time_blur > 0
-    motion, speed = _motion_and_speed(p, t, t_ref, harmonics, cols.get("drift"),
+    jitter = jitter_col is not None or time_blur > 0
+    motion, speed = _motion_and_speed(p, t, t_ref, harmonics, drift_col,
                                       grid=grid if t.size > 1 else None, speed=jitter)
     # z - k, built in place: the reading k's interval is [k + lo_shift, k + hi_shift).
     zk = motion
@@ -328,17 +551,17 @@ def _interval_bounds(p, t, counts, centre_count, t_ref, harmonics, effects, offs
     log_s = p[:, 4:5]
     if jitter:
         sig_t2 = time_blur ** 2
-        if "time_jitter" in cols:
+        if jitter_col is not None:
             dt = np.median(np.diff(t)) if t.size > 1 else 1.0
-            sig_t2 = sig_t2 + (p[:, cols["time_jitter"]:cols["time_jitter"] + 1] * dt) ** 2
+            sig_t2 = sig_t2 + (p[:, jitter_col:jitter_col + 1] * dt) ** 2
         s = 10.0 ** log_s
         inv_s = 1.0 / np.sqrt(s * s + speed * speed * sig_t2)
     else:
         inv_s = 10.0 ** -log_s
-    if "hysteresis" in cols:
+    if band_col is not None:
         # Previous reading c: k > c reads [k + w/2, k + 1 + w/2), k < c [k - w/2, k + 1 - w/2),
         # k = c [k - w/2, k + 1 + w/2).
-        half_w = 0.5 * p[:, cols["hysteresis"]:cols["hysteresis"] + 1]
+        half_w = 0.5 * p[:, band_col:band_col + 1]
         prev = _previous(counts, prev_counts) - offset
         lo_sign = np.where(k > prev, 1.0, -1.0)
         hi_sign = np.where(k < prev, -1.0, 1.0)
@@ -370,7 +593,7 @@ def pointwise_log_likelihood(params, t, counts, step, centre_count, t_ref, harmo
     step, centre_count, t_ref :
         As :func:`enclab.lrde.fit.log_likelihood`.
     harmonics, effects : tuple
-        Model terms; ``count_jump`` is ignored here (see :func:`log_likelihood`).
+        Model terms; a count jump is ignored here (see :func:`log_likelihood`).
     offset : int
         Count offset subtracted from ``counts`` (and the previous counts) before reading.
     time_blur : float
@@ -424,7 +647,8 @@ def _jump_terms(params, t, counts, step, centre_count, t_ref, harmonics, effects
 
 def log_likelihood(params, t, counts, step, centre_count, t_ref, harmonics=(), effects=(),
                    grid=None, prev_counts=None):
-    """Total log-likelihood per parameter row; ``count_jump`` marginalised over index and sign.
+    """Total log-likelihood per parameter row; a count jump (:attr:`Effect.offsets_counts`)
+    marginalised over index and sign.
 
     The jump's prior is uniform over the ``n - 1`` gaps between samples and the two signs.
     ``grid`` is :func:`enclab.lrde.model.uniform_grid` of ``t`` or None (same values, slower);
@@ -432,7 +656,7 @@ def log_likelihood(params, t, counts, step, centre_count, t_ref, harmonics=(), e
     """
     effects = check_effects(effects)
     p = np.atleast_2d(np.asarray(params, dtype=float))
-    if "count_jump" not in effects:
+    if not offsets_counts(effects):
         lower, upper = _interval_bounds(p, t, counts, centre_count, t_ref, harmonics, effects,
                                         0, 0.0, grid, prev_counts)
         out = _log_interval_rows(lower, upper)

@@ -405,10 +405,10 @@ class FitResult:
         """Motion about the bias, ``theta(t) - b``, in rad, for one SI sample row."""
         t = np.asarray(t, dtype=float)
         internal = self.to_internal(np.asarray(row, dtype=float)[None, :])
-        if "drift" in self.effects:
+        drift_col = lrde_effects.parameter_column(self.harmonics, self.effects, "bends_phase")
+        if drift_col is not None:
             motion, _ = lrde_effects._motion_and_speed(
-                internal, t, self.t_ref, self.harmonics,
-                lrde_effects._columns(self.harmonics, self.effects)["drift"])
+                internal, t, self.t_ref, self.harmonics, drift_col)
             return self.step * motion[0]
         return self.step * _motion_steps(internal, t, self.t_ref, None, self.harmonics)[0]
 
@@ -568,7 +568,7 @@ def _setup(t, counts, step, f_hz, sigma_range, sigma_prior, harmonics, effects,
     # a dead band hides up to its width of the stroke; harmonics move the turning points by
     # up to their amplitudes; position noise reads a few sigma beyond them.
     reach = 2.0 * np.sqrt(2.0) * _HARMONIC_BOUND * len(harmonics)
-    longer = reach + (lrde_effects._HYST_MAX if "hysteresis" in effects else 0.0)
+    longer = reach + sum(e.stroke_reach for e in lrde_effects.active(effects))
     shorter = reach + 4.0 * 10.0 ** log_sigma_bounds[1]
     bounds = np.array([
         [max(K - 1.0 - shorter, 0.05), K + 1.0 + longer],
@@ -578,32 +578,30 @@ def _setup(t, counts, step, f_hz, sigma_range, sigma_prior, harmonics, effects,
         list(log_sigma_bounds),
     ] + [[-_HARMONIC_BOUND, _HARMONIC_BOUND]] * (2 * len(harmonics))
         + lrde_effects.effect_bounds(effects, duration, dt))
-    if "count_jump" in effects:
+    if lrde_effects.offsets_counts(effects):
         # The modal centre count may be the shorter segment's: E_b of the longer one's frame
         # then lies a step further out.
         bounds[1] = [-2.0, 2.0]
     log_sigma0 = np.log10(init["sigma"] / step)
     if not log_sigma_bounds[0] < log_sigma0 < log_sigma_bounds[1]:
         log_sigma0 = 0.5 * (log_sigma_bounds[0] + log_sigma_bounds[1])
-    effect_names = lrde_effects.effect_param_names(effects)
-    effect_x0 = {"hysteresis": 0.02, "drift": 0.0, "time_jitter": 0.05}
+    sampled = [e for e in lrde_effects.active(effects) if e.sampled]
     # Posterior widths shrink as 1/sqrt(cycles), the frequency's also as 1/duration and the
     # drift's as 1/duration**2: the start dispersion follows (from 20 cycles on), so that the
     # walkers start inside the posterior. Started wider, a few walkers of a long log's narrow
     # posterior stay far out for the whole chain (R-hat 1.05 after 1000 steps at 100 cycles).
     ratio = min(1.0, _DISPERSION_CYCLES / max(duration * init["f_hz"], 1.0))
     shrink = np.sqrt(ratio)
-    effect_scale = {"hysteresis": 0.01, "time_jitter": 0.02, "drift": 2e-4 / duration * ratio}
     motion = lrde_motion.from_harmonics(harmonics)
     x0 = np.array([init["A12"] / step, init["E_b"] / step, init["f_hz"], init["phase"],
                    log_sigma0]
                   + list(motion.start(t, counts, init["centre_count"], init["f_hz"],
                                       init["phase"], init["t_ref"]))
-                  + [effect_x0[n] for n in effect_names])
+                  + [e.start for e in sampled])
     # Dispersion of the start: a few tenths of the expected posterior widths, so that
     # independent ensembles start apart and R-hat can detect non-mixing.
     scale = shrink * np.array([0.005, 0.003, 0.002 / duration, 0.005, 0.05]
-                              + [0.003] * (2 * len(harmonics)) + [effect_scale[n] for n in effect_names])
+                              + [0.003] * (2 * len(harmonics)) + [e.start_spread(duration, ratio) for e in sampled])
     extra_scale = [step] * (2 * len(harmonics)) + lrde_effects.effect_scales(effects, step, dt)
     kwargs = {"t": t, "counts": counts, "step": step, "centre_count": init["centre_count"],
               "t_ref": init["t_ref"], "bounds": bounds, "grid": uniform_grid(t),
@@ -1002,7 +1000,7 @@ def map_fit(t, counts, step, f_hz=None, harmonics=(), effects=(), start=None,
     starts = [setup["x0"].copy()]
     if start is not None:
         starts[0][:5] = np.asarray(start, dtype=float)[:5]
-    if "count_jump" in setup["effects"]:
+    if lrde_effects.offsets_counts(setup["effects"]):
         # A jump wrecks the sinusoid's optimum over the whole log: also start from the
         # sinusoid of the first and of the last third, one of which is free of the jump.
         third = t.size // 3
@@ -1018,9 +1016,8 @@ def map_fit(t, counts, step, f_hz=None, harmonics=(), effects=(), start=None,
 
     simplex_step = np.array([0.02, 0.02, 0.01 / duration, 0.02, 0.2]
                             + [0.02] * (2 * len(setup["harmonics"]))
-                            + [{"hysteresis": 0.05, "drift": 0.01 / duration,
-                                "time_jitter": 0.1}[n]
-                               for n in lrde_effects.effect_param_names(setup["effects"])])
+                            + [e.simplex_step(duration)
+                               for e in lrde_effects.active(setup["effects"]) if e.sampled])
     # A first run with the jitter held at 0.05 step or more: a smoothed likelihood whose
     # optimum is not hidden behind the cliffs of the nearly hard-edged one.
     smooth = max(np.log10(0.05), bounds[4, 0] + margin[4])

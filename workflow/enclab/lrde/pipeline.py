@@ -384,7 +384,7 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
         jump = None
         if chosen_fit is not None:
             _log.info("emcee fit of %s: %.1f s wall", chosen_fit.label, chosen_fit.wall_time_s)
-            if "count_jump" in point["effects"]:
+            if lrde_effects.offsets_counts(point["effects"]):
                 index, delta, mass, _ = lrde_effects.jump_posterior(
                     point["x"], t, counts, step, point["centre"], point["t_ref"],
                     point["harmonics"], point["effects"])

@@ -11,6 +11,8 @@ import math
 
 import numpy as np
 
+from enclab.lrde import effects as lrde_effects
+
 __all__ = ["summary_block", "motion_model_block", "residuals_block", "report_markdown",
            "batch_rows", "effect_model_block", "estimates_block", "trust_block",
            "effect_residuals_block", "reference_block", "effect_params"]
@@ -187,8 +189,6 @@ def effect_model_block(comparison: dict | None, chosen_fit=None, reason: str | N
     with ``averaged_over`` (the labels of the fits whose posteriors the reported estimates
     pool, :func:`enclab.lrde.fit.pool_fits`) that list, and the note says so.
     """
-    from enclab.lrde import effects as lrde_effects
-
     if comparison is None:
         return {"chosen": "sinusoid", "harmonics": [], "effects": [], "models": [],
                 "reason": reason}
@@ -238,23 +238,13 @@ def effect_params(chosen_fit=None, duration_s: float | None = None,
         if "A12_fundamental" in chosen_fit.summary:
             # A12 reports the distorted motion's stroke; this is its fundamental's.
             params["A12_fundamental"] = _triple(chosen_fit.summary["A12_fundamental"])
-        if "drift" in extra and duration_s:
-            params["drift_over_log"] = {k: _num(v * duration_s)
-                                        for k, v in chosen_fit.summary["drift"].items()}
+        for name in extra:
+            if name in lrde_effects.REGISTRY:
+                params.update(lrde_effects.effect(name).derived(chosen_fit.summary[name],
+                                                                duration_s))
     if jump is not None:
         params["jump"] = jump
     return params
-
-
-# What a term the truth channel does not confirm stands for instead.
-_UNCONFIRMED = {
-    "hysteresis": "the encoder reads its truth channel without a dead band, so the term stands "
-                  "for the motion (it lingers at its turning points, as a closed loop's does)",
-    "count_jump": "the truth channel shows no missed count, so the term stands for a step of "
-                  "the motion itself",
-    "time_jitter": "the truth channel shows no sample-time jitter, so the term stands for "
-                   "noise of the motion",
-}
 
 
 def reference_block(reference: dict | None, model_block: dict, added: list) -> dict | None:
@@ -286,7 +276,7 @@ def reference_block(reference: dict | None, model_block: dict, added: list) -> d
         by_term.setdefault(f["term"], f)
     terms = []
     for term in list(dict.fromkeys(list(reference["effects"]) + list(model_block["effects"]))):
-        if term == "drift":  # the motion's frequency: not a property of the reading
+        if not lrde_effects.effect(term).of_the_reading:  # e.g. the motion's frequency
             continue
         ref = by_term.get(term)
         fit_q = params.get(term) if isinstance(params.get(term), dict) else None
@@ -294,7 +284,7 @@ def reference_block(reference: dict | None, model_block: dict, added: list) -> d
                "reference_ci": ref and ref["ci"], "consistent": None, "note": None}
         if ref is None:
             row["status"] = "not confirmed by the truth channel"
-            row["note"] = _UNCONFIRMED.get(term)
+            row["note"] = lrde_effects.effect(term).unconfirmed
         else:
             row["status"] = ("added from the truth channel" if term in added
                              else "found by both")
@@ -305,15 +295,6 @@ def reference_block(reference: dict | None, model_block: dict, added: list) -> d
     return {"truth": reference["truth"], "explained": reference["explained"],
             "found": reference["found"], "not_modelled": reference["not_modelled"],
             "added": list(added), "terms": terms}
-
-
-# What a term the truth channel does not confirm leaves the fitted motion unable to say: the
-# estimates that rest on the term's reading being the encoder's.
-_UNCONFIRMED_BIASES = {
-    "hysteresis": (("A12",), "the truth channel shows no dead band, so the model's hysteresis "
-                   "stands for the motion at its turning points and the fitted motion's stroke "
-                   "is not the shaft's"),
-}
 
 
 def _whole_log_check_passed(check: dict) -> bool:
@@ -352,9 +333,12 @@ def trust_block(fit, model_block: dict) -> dict:
     if ref and not ref.get("explained", True):
         reasons.append(f"against the truth channel ({ref.get('truth')}) the readings hold more "
                        "than any named effect explains")
-    unconfirmed = [_UNCONFIRMED_BIASES[row["term"]] for row in ref.get("terms", [])
+    # what a term the truth channel does not confirm leaves the fitted motion unable to say:
+    # the estimates that rest on the term's reading being the encoder's
+    unconfirmed = [lrde_effects.effect(row["term"]).unconfirmed_biases
+                   for row in ref.get("terms", [])
                    if row["status"] == "not confirmed by the truth channel"
-                   and row["term"] in _UNCONFIRMED_BIASES]
+                   and lrde_effects.effect(row["term"]).unconfirmed_biases]
     out = {}
     for key in _ESTIMATES:
         r = list(reasons)
@@ -368,7 +352,8 @@ def trust_block(fit, model_block: dict) -> dict:
 
 
 def effect_residuals_block(model_block: dict) -> dict | None:
-    """DESIGN's ``residuals`` block for a low-resolution log from its effect comparison."""
+    """The ``residuals`` block of docs/output-contract.md for a low-resolution log, from its
+    effect comparison."""
     models = model_block.get("models") or []
     if not models:
         return None

@@ -1,4 +1,4 @@
-"""Effect library: composable terms of the measured-channel model (DESIGN 2.3).
+"""Effect library: composable terms of the measured-channel model (docs/output-contract.md).
 
 The measured channel with step ``step`` reads the count ``k = floor(theta_eff / step + c)``
 of an *effective* angle ``theta_eff``: the truth angle changed by the effects below, in the
@@ -22,13 +22,17 @@ selection fills: ``"_step"`` (measured step, rad), ``"_offset"`` (``c``, counts)
 ``"_smooth_correction"`` (rad: a smooth reconstruction of the angle minus the truth reading,
 zero for a continuous truth).
 
+Each effect is one :class:`Effect` subclass listed in :data:`EFFECTS` (the order the selection
+tries them) and found by name in :data:`REGISTRY`. The selection and the reports reach an
+effect only through its attributes and methods; an effect that the low-resolution fit
+(:mod:`enclab.lrde.effects`) also has declares that term as its ``counterpart``, and one that has
+none says why (``lrde_no_term``) and which of that fit's estimates it biases (``lrde_biases``).
+Adding an effect is adding a class and its test (docs/development.md, "Adding an effect").
+
 Each effect documents its *signature*: what the residual ``measured - truth`` looks like
 when the effect is present and not modelled. :meth:`Effect.signature` gives its linearisation
 ``d theta_eff / d params`` at the null (effect absent), which the selection regresses the
 residual on for a starting guess.
-
-The module also holds the motion terms of the sinusoid (LRDE) fit: harmonic distortion and
-linear frequency drift (:func:`drift_phase`, :func:`distorted_sinusoid`).
 """
 from __future__ import annotations
 
@@ -58,6 +62,7 @@ __all__ = [
     "MissedCounts",
     "WrapAround",
     "EFFECTS",
+    "REGISTRY",
     "play_operator",
     "motion_sign",
     "run_blocks",
@@ -171,6 +176,24 @@ class Effect:
         Parameters whose null value (0) lies on the boundary of their range: the likelihood
         ratio there follows a 50:50 mixture of chi2 with one degree of freedom fewer and
         chi2 (Self & Liang 1987).
+    default : bool
+        Tried when the caller names no candidates; an effect off by default is tried only
+        when named in ``candidates``.
+    reads_counts : bool
+        The effect needs the measured counts (``aux["_counts"]``): it is left out of a
+        prediction on another trajectory.
+    counterpart : str or None
+        The low-resolution fit's term of the same physics (:data:`enclab.lrde.effects.REGISTRY`,
+        whose class lists this effect among its ``counterparts``), or None.
+    counterpart_param : str or None
+        This effect's parameter that is the counterpart's (same SI unit; its magnitude is
+        taken, the low-resolution terms being unsigned).
+    lrde_no_term : str
+        Without a counterpart: what the effect does to the low-resolution fit's estimates.
+    lrde_biases : tuple of str
+        Without a counterpart: the low-resolution estimates whose assumptions it breaks.
+    test : str
+        The test (``path::name``) that checks the effect against a brute-force simulation.
     """
 
     name = "effect"
@@ -179,6 +202,13 @@ class Effect:
     additive = False
     order = 50
     boundary: tuple = ()
+    default = True
+    reads_counts = False
+    counterpart = None
+    counterpart_param = None
+    lrde_no_term = "no term of the low-resolution model describes it"
+    lrde_biases: tuple = ()
+    test = ""
     #: The effect is an error of the measured angle (a calibration a controller's lookup table
     #: holds, :mod:`enclab.residuals.lookup_table`); the others are fitted beside such a table.
     angle_map = False
@@ -228,6 +258,18 @@ class Effect:
         """Extra derived quantities for reports (e.g. amplitude and phase)."""
         return {}
 
+    @classmethod
+    def propose(cls, ctx, mu):
+        """A discrete effect found by its search on the current model, or None.
+
+        ``mu`` is the current model's continuous count prediction (counts). Only for
+        ``kind == "discrete"``: their parameters are found here, not by the optimiser."""
+        raise NotImplementedError(f"{cls.name} is not a discrete effect")
+
+    def found_params(self) -> dict:
+        """The parameters a discrete effect's search found (JSON-ready)."""
+        return {}
+
     def describe(self, params: dict) -> str:
         """The fitted values in words for the verdict (default: each parameter and its value)."""
         return ", ".join(f"{k} {v:.3g}" for k, v in params.items())
@@ -251,8 +293,37 @@ class Effect:
         """What this log's motion cannot tell about the effect's parameters (words), or None."""
         return None
 
+    @classmethod
+    def lrde_finding(cls, params: dict, ci: dict) -> dict:
+        """The effect's findings (``params``, ``ci`` of a ``residuals.json`` effect) as the
+        low-resolution fit's term.
+
+        Returns ``{"term", "value", "ci"}`` (the counterpart, the magnitude of
+        ``counterpart_param`` and its interval of magnitudes) or, without a counterpart,
+        ``{"why", "biases"}`` (:attr:`lrde_no_term`, :attr:`lrde_biases`).
+        """
+        if cls.counterpart is None:
+            return {"why": cls.lrde_no_term, "biases": list(cls.lrde_biases)}
+        key = cls.counterpart_param
+        if key not in params:
+            raise ValueError(f"residual effect {cls.name!r} has no parameter {key!r}: "
+                             f"{sorted(params)}")
+        return {"term": cls.counterpart, "value": abs(float(params[key])),
+                "ci": magnitude_interval((ci or {}).get(key))}
+
     def __repr__(self) -> str:
         return f"{type(self).__name__}()"
+
+
+def magnitude_interval(ci) -> list[float] | None:
+    """The interval ``[lo, hi]`` of ``|p|`` for a signed parameter's interval ``ci`` (None
+    passes through): a signed width whose interval spans zero starts at zero width."""
+    if ci is None:
+        return None
+    lo, hi = sorted(abs(float(v)) for v in ci)
+    if float(ci[0]) * float(ci[1]) < 0:
+        lo = 0.0
+    return [lo, hi]
 
 
 class TruthQuantization(Effect):
@@ -269,6 +340,8 @@ class TruthQuantization(Effect):
     name = "truth_quantization"
     kind = "noise"
     order = 0
+    lrde_no_term = "the reference channel's own quantization"
+    test = "tests/test_residual_effects.py::test_truth_quantization_std_is_uniform_std"
 
     def applicable(self, ctx) -> bool:
         return bool(ctx.truth_step)
@@ -293,6 +366,8 @@ class Hysteresis(Effect):
     additive = True
     param_names = ("h",)
     order = 10
+    counterpart, counterpart_param = "hysteresis", "h"
+    test = "tests/test_residual_select.py::test_round_trip_recovers_parameters_within_their_standard_error"
 
     separated_by = "slow reversals (the play's ramp against the dead band's step)"
 
@@ -334,6 +409,9 @@ class Backlash(Effect):
     order = 11
     # the play operator is non-linear in w: the linearised guess can land in a worse basin
     multistart = True
+    # a play before the encoder reads like a dead band of the same width
+    counterpart, counterpart_param = "hysteresis", "w"
+    test = "tests/test_residual_select.py::test_round_trip_recovers_parameters_within_their_standard_error"
 
     separated_by = "slow reversals over more than the play's width"
 
@@ -380,6 +458,9 @@ class AngleHarmonics(Effect):
     param_names = ("a1", "b1", "a2", "b2")
     order = 20
     angle_map = True
+    lrde_no_term = ("a once- or twice-per-turn error of the disc; over a stroke of a few "
+                    "steps it acts as a scale and offset error of the reading")
+    test = "tests/test_residual_select.py::test_backward_check_drops_an_effect_that_a_later_one_made_redundant"
 
     separated_by = _FULL_TURN
 
@@ -432,6 +513,9 @@ class HarmonicMap(Effect):
     max_order = 8
     n_blocks = 40
     heldout_interleave = 10
+    lrde_no_term = ("an angle error of three or more cycles per turn; over a stroke of a few "
+                    "steps it acts as a scale and offset error of the reading")
+    test = "tests/test_residual_effects.py::test_harmonic_map_order_is_chosen_on_heldout_blocks"
 
     separated_by = _FULL_TURN
 
@@ -505,6 +589,8 @@ class LinePitchHarmonics(Effect):
     name = "line_pitch_harmonics"
     param_names = ("a", "b")
     order = 30
+    lrde_no_term = "an interpolation error far below one coarse step"
+    test = "tests/test_residual_effects.py::test_line_pitch_harmonics_periodic_in_line_pitch"
 
     def applicable(self, ctx) -> bool:
         # The count depends on the angle only at the thresholds; at a pitch of four counts a
@@ -538,6 +624,10 @@ class QuadratureEdges(Effect):
     name = "quadrature_edges"
     param_names = ("e0", "e1", "e2")
     order = 40
+    lrde_no_term = ("unequal edge spacing: the levels of the reading are not evenly "
+                    "spaced, which the model's uniform levels cannot represent")
+    lrde_biases = ("A12", "a_eq", "E_b", "offset_a")  # the levels are evenly spaced there
+    test = "tests/test_residual_effects.py::test_quadrature_edges_model_matches_exact_edge_displacement"
 
     def bounds(self, ctx):
         lim = 0.45 * ctx.step
@@ -572,6 +662,9 @@ class Latency(Effect):
     additive = True
     param_names = ("tau",)
     order = 5
+    lrde_no_term = ("a constant delay shifts the phase of the motion only; A12, a_eq and E_b are "
+                    "unaffected")
+    test = "tests/test_residual_select.py::test_round_trip_recovers_parameters_within_their_standard_error"
 
     separated_by = "a range of speeds with dwells and slow reversals"
 
@@ -608,6 +701,8 @@ class TimestampJitter(Effect):
     kind = "noise"
     order = 26
     boundary = ("sigma_t",)
+    counterpart, counterpart_param = "time_jitter", "sigma_t"
+    test = "tests/test_residual_effects.py::test_timestamp_jitter_std_is_sigma_times_speed"
 
     separated_by = "a range of speeds"
 
@@ -637,6 +732,9 @@ class ScaleMismatch(Effect):
     param_names = ("g",)
     order = 21
     angle_map = True
+    lrde_no_term = ("a scale error of the reading rescales the stroke; the fit reports the "
+                    "stroke as read")
+    test = "tests/test_residual_select.py::test_round_trip_recovers_parameters_within_their_standard_error"
 
     separated_by = _FULL_TURN
 
@@ -669,6 +767,9 @@ class Compliance(Effect):
     additive = True
     param_names = ("kappa",)
     order = 12
+    lrde_no_term = ("a torque-dependent lag between the motion and the encoder; it distorts "
+                    "the motion the encoder sees, as a motion harmonic would")
+    test = "tests/test_residual_pipeline.py::test_compliance_against_an_aux_torque_channel"
 
     separated_by = "the same angles and speeds at different loads"
 
@@ -704,6 +805,7 @@ class SofteningCompliance(Effect):
     additive = True
     param_names = ("k1", "k2")
     order = 12
+    test = "tests/test_residual_select.py::test_softening_compliance_is_found_with_its_values"
 
     separated_by = "a wider range of torques at the same angles and speeds"
 
@@ -776,6 +878,7 @@ class CalibrationMap(Effect):
     #: free there (contiguous folds scored such maps 1e5 nats worse than none)
     n_blocks = 40
     heldout_interleave = 10
+    test = "tests/test_residual_select.py::test_calibration_map_is_found_and_matches_the_true_map"
 
     separated_by = _FULL_TURN
 
@@ -883,6 +986,10 @@ class SlowDrift(Effect):
     name = "slow_drift"
     additive = True
     order = 25
+    lrde_no_term = ("a slow drift of the reading moves a_eq over the log; the model's a_eq is "
+                    "constant, so its a_eq and E_b hold only as averages over the log")
+    lrde_biases = ("a_eq", "E_b", "offset_a")  # a_eq is constant in the model
+    test = "tests/test_residual_loop.py::test_a_slow_drift_is_a_drift_not_a_staircase_of_missed_counts"
 
     separated_by = "passes over the same angles spread over the whole log"
 
@@ -978,6 +1085,10 @@ class LevelShift(Effect):
     order = 24
     drivers = ("torque", "command", "current")
     min_fraction = 0.05
+    lrde_no_term = ("a change of the reading's offset during the log; the model's a_eq is "
+                    "constant, so its a_eq and E_b hold only as averages over the log")
+    lrde_biases = ("a_eq", "E_b", "offset_a")  # a_eq is constant in the model
+    test = "tests/test_residual_effects.py::test_level_shift_selected_on_a_brute_force_simulated_log"
 
     separated_by = "passes over the same angles before and after the shift"
 
@@ -1090,6 +1201,9 @@ class MissedCounts(Effect):
     additive = True
     kind = "discrete"
     order = 60
+    counterpart = "count_jump"
+    lrde_biases = ("a_eq", "E_b", "offset_a")  # more than the one modelled jump
+    test = "tests/test_residual_select.py::test_missed_counts_and_wrap_are_found"
 
     def __init__(self, times=(), jumps=()):
         self.times = tuple(float(x) for x in times)
@@ -1098,6 +1212,34 @@ class MissedCounts(Effect):
 
     def bounds(self, ctx):
         return []
+
+    @classmethod
+    def lrde_finding(cls, params, ci):
+        """One step of one count is the low-resolution fit's ``count_jump`` (its time as the
+        value, s); several steps, or a larger one, are beyond that term."""
+        jumps = [v for k, v in params.items() if k.startswith("n_")]
+        if len(jumps) != 1 or abs(round(float(jumps[0]))) != 1:
+            return {"why": f"{len(jumps)} count steps found (sizes "
+                           f"{', '.join(f'{float(j):+.0f}' for j in jumps)}); the model holds "
+                           "one step of one count",
+                    "biases": list(cls.lrde_biases)}
+        return {"term": cls.counterpart, "value": float(params.get("t_1", float("nan"))),
+                "ci": None, "unit": "s (time of the step)"}
+
+    @classmethod
+    def propose(cls, ctx, mu):
+        resid = ctx.counts - (mu - 0.5)
+        # samples farther than the truth's half step (in counts) from a transition of floor(mu)
+        half = 0.5 * ctx.truth_step / ctx.step
+        informative = np.abs(mu - np.round(mu)) > half
+        times, jumps = cls.detect(ctx.t, resid, informative=informative)
+        return cls(times, jumps) if times else None
+
+    def found_params(self):
+        out = {}
+        for j, (tj, nj) in enumerate(zip(self.times, self.jumps)):
+            out[f"t_{j + 1}"], out[f"n_{j + 1}"] = tj, float(nj)
+        return out
 
     def apply(self, theta, t, velocity, aux, params=None):
         shift = np.zeros(np.shape(theta))
@@ -1205,12 +1347,23 @@ class WrapAround(Effect):
     param_names = ("period",)
     kind = "discrete"
     order = 70
+    reads_counts = True
+    lrde_no_term = "a counter wrap; not expected on a stroke of a few steps"
+    test = "tests/test_residual_select.py::test_missed_counts_and_wrap_are_found"
 
     def __init__(self, period: float | None = None):
         self.period = period
 
     def bounds(self, ctx):
         return []
+
+    @classmethod
+    def propose(cls, ctx, mu):
+        period = cls.detect(ctx.truth, ctx.grid + ctx.step * ctx.counts, ctx.step)
+        return cls(period) if period else None
+
+    def found_params(self):
+        return {"period": float(self.period)}
 
     def apply(self, theta, t, velocity, aux, params=None):
         step = aux["_step"]
@@ -1293,3 +1446,6 @@ EFFECTS = (
     MissedCounts,
     WrapAround,
 )
+
+#: Every effect class by name: the candidates and the exact model's truth quantization.
+REGISTRY = {cls.name: cls for cls in EFFECTS + (TruthQuantization,)}

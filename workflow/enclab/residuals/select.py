@@ -300,12 +300,7 @@ class _Model:
     def params_of(self, x, e_index):
         e, sl = self.effects[e_index], self.slices[e_index]
         if e.kind == "discrete":
-            if isinstance(e, fx.MissedCounts):
-                out = {}
-                for j, (tj, nj) in enumerate(zip(e.times, e.jumps)):
-                    out[f"t_{j + 1}"], out[f"n_{j + 1}"] = tj, float(nj)
-                return out
-            return {"period": float(e.period)}
+            return e.found_params()
         return dict(zip(e.param_names, (float(v) for v in x[sl])))
 
 
@@ -605,22 +600,12 @@ def _forms(effect, ctx):
 
 
 def _discrete_candidate(name, cur: _Fitted, ctx):
+    """The discrete effect ``name`` as its search finds it on the current model (once)."""
+    cls = fx.REGISTRY[name]
     mu, _ = cur.model.forward(ctx, cur.x)
-    if name == "missed_counts":
-        if any(isinstance(e, fx.MissedCounts) for e in cur.model.effects):
-            return None
-        resid = ctx.counts - (mu - 0.5)
-        # samples farther than the truth's half step (in counts) from a transition of floor(mu)
-        half = 0.5 * ctx.truth_step / ctx.step
-        informative = np.abs(mu - np.round(mu)) > half
-        times, jumps = fx.MissedCounts.detect(ctx.t, resid, informative=informative)
-        return fx.MissedCounts(times, jumps) if times else None
-    if name == "wrap_around":
-        if any(isinstance(e, fx.WrapAround) for e in cur.model.effects):
-            return None
-        period = fx.WrapAround.detect(ctx.truth, ctx.grid + ctx.step * ctx.counts, ctx.step)
-        return fx.WrapAround(period) if period else None
-    raise ValueError(name)
+    if any(isinstance(e, cls) for e in cur.model.effects):
+        return None
+    return cls.propose(ctx, mu)
 
 
 def _lr_pvalue(lr, k, n_boundary):
@@ -1042,17 +1027,17 @@ class SelectionResult:
             truth = np.asarray(truth, float)
             ctx = _make_ctx(t, truth, np.zeros(t.size, np.int64), ctx.step, ctx.truth_step, aux or {},
                             ctx.grid, ctx.priv.get("_line_pitch"))
-            effects = [e for e in fitted.model.effects if not isinstance(e, fx.WrapAround)]
+            effects = [e for e in fitted.model.effects if not e.reads_counts]
             model = _Model(effects)
             x = np.concatenate([fitted.x[:2]] + [fitted.x[sl] for e, sl in zip(fitted.model.effects, fitted.model.slices)
-                                                 if not isinstance(e, fx.WrapAround)])
+                                                 if not e.reads_counts])
             mu, _ = model.forward(ctx, x)
         else:
             mu, _ = fitted.model.forward(ctx, fitted.x)
         return ctx.grid + ctx.step * np.floor(mu)
 
     def to_summary(self) -> dict:
-        """The DESIGN section 3 ``residuals`` block (JSON-ready)."""
+        """The ``residuals`` block of docs/output-contract.md (JSON-ready)."""
 
         def clean(d):
             return {k: (list(v) if isinstance(v, tuple) else v) for k, v in d.items()}
@@ -1254,6 +1239,8 @@ def _candidates(ctx, names):
         name = cls.name
         if names is not None and name not in names:
             continue
+        if names is None and not cls.default:  # tried only when named
+            continue
         if cls.kind == "discrete":
             out.append(name)
             continue
@@ -1305,7 +1292,8 @@ def select_effects(
     seed : int
         Accepted for the agreed interface; the procedure is deterministic (no random draws).
     candidates : iterable of str, optional
-        Effect names to consider (default: all applicable, see ``effects.EFFECTS``).
+        Effect names to consider (default: every applicable effect of ``effects.EFFECTS``
+        whose class is on by ``default``).
     alpha : float
         Level of the likelihood-ratio test each added effect must pass.
     bic_threshold : float
@@ -1318,8 +1306,8 @@ def select_effects(
         Line pitch (rad) of the line-pitch harmonics; default four measured steps.
     stop_at_floor : bool
         After an effect was added, stop as soon as the residual std is within the floor's
-        interval (the stop rule of DESIGN 2.3). False tries further candidates anyway (the
-        selection then ends only when none passes).
+        interval (the stop rule of docs/output-contract.md). False tries further candidates
+        anyway (the selection then ends only when none passes).
     distinguish_bic : float or None
         Margin of the swap-in ``delta_bic`` below which an alternative is reported as not
         distinguishable from a chosen effect (module notes); None takes ``bic_threshold``.
