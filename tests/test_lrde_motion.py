@@ -1,5 +1,7 @@
 """Motion models of the low-resolution fit (enclab.lrde.motion): paper 002's quantities for a
 periodic motion that is not a sinusoid, against brute-force readings."""
+import math
+
 import numpy as np
 import pytest
 
@@ -149,3 +151,28 @@ def test_bias_figure_draws_the_fitted_motion_beside_the_truth():
     assert any("true angle" in x for x in labels)
     fitted = next(line for line in fig.axes[0].get_lines() if "fitted" in line.get_label())
     np.testing.assert_allclose(fitted.get_ydata(), np.rad2deg(e_b["median"]))
+
+
+# ------------------------------------------------- drifting and distorted sinusoid (closed forms)
+def test_drift_phase_instantaneous_frequency():
+    t = np.linspace(0, 5, 50001)
+    phi = motion.drift_phase(t, 2.0, 0.3, drift_hz_per_s=0.1, t_ref=1.0)
+    f_inst = np.gradient(phi, t) / (2 * np.pi)
+    np.testing.assert_allclose(f_inst[1:-1], 2.0 + 0.1 * (t[1:-1] - 1.0), atol=1e-9)
+    assert phi[np.searchsorted(t, 1.0)] == pytest.approx(0.3)
+
+
+def test_distorted_sinusoid_terms_recovered_exactly_by_least_squares():
+    t = np.linspace(0, 3, 3000)
+    truth = dict(bias=0.01, amplitude=0.2, f0_hz=1.3, phase=0.4, drift_hz_per_s=0.02, a3=0.004, psi3=1.1, a2=0.002, psi2=-0.5)
+    y = motion.distorted_sinusoid(t, **truth)
+    phi = motion.drift_phase(t, 1.3, 0.4, 0.02)
+    X = np.column_stack([np.ones_like(t), np.sin(phi), np.sin(2 * phi), np.cos(2 * phi), np.sin(3 * phi), np.cos(3 * phi)])
+    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    assert coef[0] == pytest.approx(0.01, abs=1e-12)
+    assert coef[1] == pytest.approx(0.2, abs=1e-12)
+    assert math.hypot(coef[2], coef[3]) == pytest.approx(0.002, abs=1e-12)
+    assert math.hypot(coef[4], coef[5]) == pytest.approx(0.004, abs=1e-12)
+    assert math.atan2(coef[5], coef[4]) == pytest.approx(1.1, abs=1e-9)
+    # with no distortion and no drift it is the plain sinusoid
+    np.testing.assert_allclose(motion.distorted_sinusoid(t, 0.0, 1.0, 1.3, 0.4), np.sin(2 * np.pi * 1.3 * t + 0.4), atol=1e-12)

@@ -253,31 +253,6 @@ def test_wrap_apply_brings_model_onto_wrapped_counts():
     np.testing.assert_array_equal(np.floor(theta / STEP + 0.5), counts)
 
 
-# ------------------------------------------------------------------------ motion terms
-def test_drift_phase_instantaneous_frequency():
-    t = np.linspace(0, 5, 50001)
-    phi = fx.drift_phase(t, 2.0, 0.3, drift_hz_per_s=0.1, t_ref=1.0)
-    f_inst = np.gradient(phi, t) / (2 * np.pi)
-    np.testing.assert_allclose(f_inst[1:-1], 2.0 + 0.1 * (t[1:-1] - 1.0), atol=1e-9)
-    assert phi[np.searchsorted(t, 1.0)] == pytest.approx(0.3)
-
-
-def test_distorted_sinusoid_terms_recovered_exactly_by_least_squares():
-    t = np.linspace(0, 3, 3000)
-    truth = dict(bias=0.01, amplitude=0.2, f0_hz=1.3, phase=0.4, drift_hz_per_s=0.02, a3=0.004, psi3=1.1, a2=0.002, psi2=-0.5)
-    y = fx.distorted_sinusoid(t, **truth)
-    phi = fx.drift_phase(t, 1.3, 0.4, 0.02)
-    X = np.column_stack([np.ones_like(t), np.sin(phi), np.sin(2 * phi), np.cos(2 * phi), np.sin(3 * phi), np.cos(3 * phi)])
-    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
-    assert coef[0] == pytest.approx(0.01, abs=1e-12)
-    assert coef[1] == pytest.approx(0.2, abs=1e-12)
-    assert math.hypot(coef[2], coef[3]) == pytest.approx(0.002, abs=1e-12)
-    assert math.hypot(coef[4], coef[5]) == pytest.approx(0.004, abs=1e-12)
-    assert math.atan2(coef[5], coef[4]) == pytest.approx(1.1, abs=1e-9)
-    # with no distortion and no drift it is the plain sinusoid
-    np.testing.assert_allclose(fx.distorted_sinusoid(t, 0.0, 1.0, 1.3, 0.4), np.sin(2 * np.pi * 1.3 * t + 0.4), atol=1e-12)
-
-
 # ------------------------------------------------------------ softening compliance and map
 def test_softening_compliance_is_k1_T_plus_k2_T_abs_T_about_their_means():
     rng = np.random.default_rng(4)

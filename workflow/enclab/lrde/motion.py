@@ -40,7 +40,7 @@ from abc import ABC, abstractmethod
 import numpy as np
 
 __all__ = ["MotionModel", "Sinusoid", "Harmonics", "FourierSeries", "motion_model",
-           "from_harmonics"]
+           "from_harmonics", "drift_phase", "distorted_sinusoid"]
 
 
 class MotionModel(ABC):
@@ -168,3 +168,38 @@ def motion_model(spec) -> MotionModel:
         raise ValueError(f"unknown motion model {spec!r}: give a list of harmonic orders, "
                          "'sinusoid' or 'fourier<K>' (K >= 2)")
     return from_harmonics(spec)
+
+
+def drift_phase(t, f0_hz: float, phase: float, drift_hz_per_s: float = 0.0, t_ref: float = 0.0):
+    """Phase of a sinusoid with linear frequency drift.
+
+    ``phi(t) = phase + 2 pi (f0 (t - t_ref) + drift (t - t_ref)^2 / 2)``, so the
+    instantaneous frequency is ``f0 + drift (t - t_ref)`` Hz.
+    """
+    tau = np.asarray(t, dtype=float) - t_ref
+    return phase + 2.0 * np.pi * (f0_hz * tau + 0.5 * drift_hz_per_s * tau**2)
+
+
+def distorted_sinusoid(
+    t,
+    bias: float,
+    amplitude: float,
+    f0_hz: float,
+    phase: float,
+    drift_hz_per_s: float = 0.0,
+    a3: float = 0.0,
+    psi3: float = 0.0,
+    a2: float = 0.0,
+    psi2: float = 0.0,
+    t_ref: float = 0.0,
+):
+    """Sinusoidal motion with harmonic distortion and frequency drift.
+
+    ``theta(t) = b + A sin(phi) + A2 sin(2 phi + psi2) + A3 sin(3 phi + psi3)`` with ``phi``
+    from :func:`drift_phase`. With ``a2 = a3 = drift = 0`` it is the pure sinusoid of the
+    paper's model (:class:`Sinusoid`). The terms are linear in ``(b, A, A2 cos psi2, A2 sin psi2, A3 cos psi3,
+    A3 sin psi3)`` for a fixed phase law, so a least-squares fit of them is exact given
+    ``f0``, ``phase`` and ``drift``.
+    """
+    phi = drift_phase(t, f0_hz, phase, drift_hz_per_s, t_ref)
+    return bias + amplitude * np.sin(phi) + a2 * np.sin(2 * phi + psi2) + a3 * np.sin(3 * phi + psi3)
