@@ -224,6 +224,16 @@ def test_truth_quantization_std_is_uniform_std():
     np.testing.assert_allclose(sd, 1e-3 / math.sqrt(12))
 
 
+def test_truth_quantization_std_is_that_of_a_simulated_truth_rounding():
+    # brute force: round a continuous angle to the truth's grid; the effect's jitter is the
+    # std of the rounding error (relative standard error sqrt(0.2 / n) = 0.1 % at n = 2e5)
+    truth_step = STEP / 8
+    theta = np.random.default_rng(7).uniform(-1.0, 1.0, 200_000)
+    truth = truth_step * np.round(theta / truth_step)
+    sd = fx.TruthQuantization().noise_std(truth, None, None, {"_truth_step": truth_step}, [])
+    assert np.std(theta - truth) == pytest.approx(sd[0], rel=5 * math.sqrt(0.2 / theta.size))
+
+
 # ------------------------------------------------------------------------ counter effects
 def test_missed_counts_detect_finds_time_and_integer_jump():
     rng = np.random.default_rng(0)

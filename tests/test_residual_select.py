@@ -565,3 +565,31 @@ def test_an_effect_of_one_part_of_the_log_that_worsens_the_heldout_error_is_drop
     summary = res.to_summary()
     assert summary["heldout_after"]["std"] <= summary["heldout_before"]["std"]
     assert not res.explained
+
+
+def test_line_pitch_harmonics_are_found_with_their_values():
+    pitch = 16 * STEP
+    a, b = 0.25 * STEP, -0.15 * STEP
+    rng = np.random.default_rng(31)
+    log = simulate_log(rng, random_motion(rng, "sine", 6.0, 0.5), duration=6.0, step=STEP, truth_step=TRUTH_STEP,
+                       effects={"line_pitch_harmonics": {"a": a, "b": b, "pitch": pitch}})
+    res = select_effects(log["t"], log["truth"], log["measured"], STEP, truth_step=TRUTH_STEP,
+                         candidates=["line_pitch_harmonics", "hysteresis"], line_pitch=pitch)
+    assert [e.name for e in res.effects] == ["line_pitch_harmonics"]
+    (e,) = res.effects
+    for name, true in (("a", a), ("b", b)):
+        lo, hi = e.ci[name]
+        se = (hi - lo) / (2 * Z90)
+        assert abs(e.params[name] - true) <= 4 * se and se < 0.2 * abs(true)
+
+
+def test_timestamp_jitter_is_found_with_its_value():
+    sigma_t = 3e-4
+    log = _log(32, {"timestamp_jitter": {"sigma_t": sigma_t}}, duration=6.0)
+    res = select_effects(log["t"], log["truth"], log["measured"], STEP, truth_step=TRUTH_STEP,
+                         candidates=["timestamp_jitter", "latency"])
+    assert [e.name for e in res.effects] == ["timestamp_jitter"]
+    (e,) = res.effects
+    lo, hi = e.ci["sigma_t"]
+    assert lo <= sigma_t <= hi and hi - lo < 0.5 * sigma_t
+

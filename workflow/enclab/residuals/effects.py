@@ -339,7 +339,7 @@ class TruthQuantization(Effect):
     kind = "noise"
     order = 0
     lrde_no_term = "the reference channel's own quantization"
-    test = "tests/test_residual_effects.py::test_truth_quantization_std_is_uniform_std"
+    test = "tests/test_residual_effects.py::test_truth_quantization_std_is_that_of_a_simulated_truth_rounding"
 
     def applicable(self, ctx) -> bool:
         return bool(ctx.truth_step)
@@ -588,7 +588,7 @@ class LinePitchHarmonics(Effect):
     param_names = ("a", "b")
     order = 30
     lrde_no_term = "an interpolation error far below one coarse step"
-    test = "tests/test_residual_effects.py::test_line_pitch_harmonics_periodic_in_line_pitch"
+    test = "tests/test_residual_select.py::test_line_pitch_harmonics_are_found_with_their_values"
 
     def applicable(self, ctx) -> bool:
         # The count depends on the angle only at the thresholds; at a pitch of four counts a
@@ -700,7 +700,7 @@ class TimestampJitter(Effect):
     order = 26
     boundary = ("sigma_t",)
     counterpart, counterpart_param = "time_jitter", "sigma_t"
-    test = "tests/test_residual_effects.py::test_timestamp_jitter_std_is_sigma_times_speed"
+    test = "tests/test_residual_select.py::test_timestamp_jitter_is_found_with_its_value"
 
     separated_by = "a range of speeds"
 
