@@ -1,11 +1,10 @@
-"""Held-out comparison of LRDE motion models (sinusoid vs harmonic distortion)."""
+"""Held-out comparison of LRDE models: motion (sinusoid, harmonic distortion) and encoder effects."""
 import numpy as np
 import pytest
 
-from enclab.lrde import compare, fit, report, simulate
+from enclab.lrde import compare, fit, simulate
 
 STEP = simulate.ROS_DRILL_STEP
-SAMPLER = {"n_ensembles": 2, "n_walkers": 24, "n_steps": 150, "n_burn": 150}
 
 
 def _log(seed, distortion=None, n_cycles=16):
@@ -23,72 +22,11 @@ def test_simulated_distortion_is_added_to_the_motion():
     assert p2["phase"] == p["phase"]
 
 
-def test_pointwise_log_likelihood_sums_to_the_fit_likelihood():
-    df, _ = _log(2, n_cycles=4)
-    t, c = df["t"].to_numpy(), df["counts"].to_numpy()
-    r = fit.fit_sinusoid(t, c, STEP, seed=0, harmonics=(3,), **dict(SAMPLER, n_steps=60,
-                                                                     n_burn=20))
-    sub = r.take(np.arange(5))
-    pointwise = compare.pointwise_log_likelihood(sub, t, c)
-    internal = fit._to_internal(r.samples[:5], STEP)
-    direct = fit.log_likelihood(internal, t, c, STEP, r.centre_count, r.t_ref,
-                                harmonics=(3,))
-    np.testing.assert_allclose(pointwise.sum(axis=1), direct, rtol=1e-10)
-
-
-@pytest.mark.slow
-def test_clean_sinusoid_keeps_the_paper_model_and_distortion_is_found():
-    df, _ = _log(7)
-    t, c = df["t"].to_numpy(), df["counts"].to_numpy()
-    out = compare.compare_motion_models(t, c, STEP, 1, candidates=((), (3,)), **SAMPLER)
-    assert out["chosen"] == [] and out["fit"] is None and out["delta_bic"] is None
-    block = report.motion_model_block(out)
-    res = report.residuals_block(block)
-    assert res["effects"] == [] and res["before"] == res["after"]
-
-    # A third harmonic of 0.05 step (0.0045 deg, 1.4 % of the stroke) on the same motion.
-    c3, s3 = 0.05 * STEP, 0.015 * STEP
-    df, _ = _log(7, distortion={3: (c3, s3)})
-    t, c = df["t"].to_numpy(), df["counts"].to_numpy()
-    out = compare.compare_motion_models(t, c, STEP, 1, candidates=((), (2,), (3,)), **SAMPLER)
-    assert out["chosen"] == [3]
-    by_order = {tuple(m["harmonics"]): m for m in out["models"]}
-    assert by_order[(3,)]["z"] > 2 and by_order[(3,)]["delta_elpd"] > by_order[(2,)]["delta_elpd"]
-    assert out["delta_bic"] > 0
-    block = report.motion_model_block(out)
-    amp = block["harmonics"]["3"]["amplitude"]
-    # The amplitude's interval is a few hundredths of a step wide; it must hold the truth to
-    # within that width (one seeded draw, not a coverage statement).
-    width = amp["q95"] - amp["q05"]
-    assert abs(amp["median"] - np.hypot(c3, s3)) < 1.5 * width
-    res = report.residuals_block(block)
-    assert res["after"] > res["before"]
-    assert res["effects"][0]["name"] == "harmonic_distortion"
-    assert res["effects"][0]["params"]["order"] == 3
-
-
-def test_compare_validates():
+def test_fit_validates_the_harmonic_orders():
     df, _ = _log(3, n_cycles=3)
     t, c = df["t"].to_numpy(), df["counts"].to_numpy()
-    with pytest.raises(ValueError, match="start with"):
-        compare.compare_motion_models(t, c, STEP, 0, candidates=((3,), ()))
     with pytest.raises(ValueError, match="harmonics"):
         fit.fit_sinusoid(t, c, STEP, seed=0, harmonics=(1,))
-    with pytest.raises(ValueError, match="halves"):
-        compare.compare_motion_models(t[:150], c[:150], STEP, 0, **SAMPLER)
-
-
-def test_report_warns_when_even_the_best_model_predicts_poorly():
-    models = [{"harmonics": [], "elpd": -1e4, "elpd_per_cycle": -2e3, "elpd_per_sample": -0.53,
-               "delta_elpd": 0.0, "delta_se": 0.0, "z": None},
-              {"harmonics": [3], "elpd": -1.1e4, "elpd_per_cycle": -2.2e3,
-               "elpd_per_sample": -0.58, "delta_elpd": -1e3, "delta_se": 700.0, "z": -1.4}]
-    motion = {"models": models, "chosen": [], "rule": "r"}
-    text = "\n".join(report._motion_model_lines(motion))
-    assert "predicts the held-out readings poorly" in text and "fits poorly" in text
-    models[0]["elpd_per_sample"] = -0.03
-    text = "\n".join(report._motion_model_lines(motion))
-    assert "poorly" not in text and "the paper's model stands" in text
 
 
 def _effect_log(seed, n_cycles=12, **kw):

@@ -708,7 +708,7 @@ def fit_sinusoid(t, counts, step, seed, n_ensembles=4, n_walkers=32, n_steps=250
         ``c<k>``, ``s<k>``. The reported ``A12`` is then the motion's peak-to-peak stroke
         (eq. 2; ``stroke_samples``) and ``A12_fundamental`` twice the fundamental's amplitude
         (the ``A12`` column of ``samples``). See
-        :func:`compare_motion_models` for choosing them on held-out data.
+        :func:`enclab.lrde.compare.compare_effect_models` for choosing them on held-out data.
     effects : tuple of str
         Encoder and clock effects of the reading model (:mod:`enclab.lrde.effects`), reported
         under their parameter names in SI units (``hysteresis`` rad, ``drift`` 1/s,

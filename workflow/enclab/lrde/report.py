@@ -13,7 +13,7 @@ import numpy as np
 
 from enclab.lrde import effects as lrde_effects
 
-__all__ = ["summary_block", "motion_model_block", "residuals_block", "report_markdown",
+__all__ = ["summary_block", "report_markdown",
            "batch_rows", "effect_model_block", "estimates_block", "trust_block",
            "effect_residuals_block", "reference_block", "effect_params"]
 
@@ -88,68 +88,6 @@ def summary_block(fit, dwell: dict) -> dict:
         | {"acceptance": _num(fit.acceptance)},
     }
     return block
-
-
-def motion_model_block(comparison: dict | None, reason: str | None = None) -> dict:
-    """The ``motion_model`` entry of the ``lrde`` block from
-    :func:`enclab.lrde.compare.compare_motion_models` (or why it was not run).
-
-    Keys: ``models`` (per candidate: ``harmonics``, held-out ``elpd``, ``elpd_per_cycle``,
-    ``delta_elpd``, ``delta_se``, ``z``), ``n_cycles``, ``chosen``, ``rule``, ``delta_bic``,
-    ``harmonics`` (per chosen order ``k``: ``c``, ``s`` and ``amplitude = hypot(c, s)``, each
-    ``{median, q05, q95}`` in rad) and ``A12_fundamental`` (twice the fundamental's amplitude
-    in the chosen model), or ``reason`` when no comparison was made.
-    """
-    if comparison is None:
-        return {"models": [], "chosen": [], "reason": reason}
-    out = {k: comparison[k] for k in ("models", "n_cycles", "chosen", "rule")}
-    out["delta_bic"] = _num(comparison["delta_bic"])
-    out["models"] = [{k: (_num(v) if isinstance(v, float) else v) for k, v in m.items()}
-                     for m in comparison["models"]]
-    chosen_fit = comparison.get("fit")
-    if chosen_fit is not None:
-        names = list(chosen_fit.param_names)
-        harmonics = {}
-        for k in chosen_fit.harmonics:
-            c = chosen_fit.samples[:, names.index(f"c{k}")]
-            s = chosen_fit.samples[:, names.index(f"s{k}")]
-            harmonics[str(k)] = {"c": _triple(chosen_fit.summary[f"c{k}"]),
-                                 "s": _triple(chosen_fit.summary[f"s{k}"]),
-                                 "amplitude": _quantile_triple(np.hypot(c, s))}
-        out["harmonics"] = harmonics
-        out["A12_fundamental"] = _triple(chosen_fit.summary.get("A12_fundamental",
-                                                                chosen_fit.summary["A12"]))
-        out["converged"] = bool(chosen_fit.converged)
-    return out
-
-
-def residuals_block(motion: dict) -> dict | None:
-    """DESIGN's ``residuals`` block for a low-resolution log, from its ``motion_model``.
-
-    The metric is the held-out log predictive density per cycle (nats; higher is better):
-    ``before`` for the paper's sinusoid, ``after`` for the chosen model; one effect
-    ``harmonic_distortion`` per chosen order with its ``c``, ``s`` (rad) and 90 % intervals.
-    None when no comparison was made.
-    """
-    models = motion.get("models") or []
-    if not models:
-        return None
-    chosen = next(m for m in models if m["harmonics"] == motion["chosen"])
-    effects = []
-    for k, h in (motion.get("harmonics") or {}).items():
-        effects.append({
-            "name": "harmonic_distortion",
-            "params": {"order": int(k), "c": h["c"]["median"], "s": h["s"]["median"],
-                       "amplitude": h["amplitude"]["median"]},
-            "ci": {"c": [h["c"]["q05"], h["c"]["q95"]], "s": [h["s"]["q05"], h["s"]["q95"]],
-                   "amplitude": [h["amplitude"]["q05"], h["amplitude"]["q95"]]},
-            "delta_bic": motion.get("delta_bic"),
-            "delta_elpd": chosen["delta_elpd"], "delta_elpd_se": chosen["delta_se"],
-        })
-    return {"metric": "held-out log predictive density per cycle (nats, higher is better; "
-                      "two-fold by halves)",
-            "before": models[0]["elpd_per_cycle"], "after": chosen["elpd_per_cycle"],
-            "effects": effects}
 
 
 _ESTIMATES = ("A12", "E_b", "a_eq", "f_hz", "offset_a", "bias_b")
@@ -379,11 +317,6 @@ def effect_residuals_block(model_block: dict) -> dict | None:
             "effects": effects}
 
 
-def _quantile_triple(x):
-    q05, q50, q95 = np.quantile(x, [0.05, 0.5, 0.95])
-    return {"median": float(q50), "q05": float(q05), "q95": float(q95)}
-
-
 def _fmt_deg(d):
     if d is None or d.get("median") is None:
         return "not identified"
@@ -432,7 +365,6 @@ def report_markdown(block: dict, log_id: str | None = None) -> str:
     lines += ["", f"Sampler diagnostics: max split R-hat {diag['rhat_max']:.4f}, min ESS "
               f"{diag['ess_min']:.0f}, max tau {diag['tau_max']:.1f} steps -> "
               f"{'converged' if diag['converged'] else _NOT_CONVERGED}."]
-    lines += _motion_model_lines(block.get("motion_model"))
     lines += _effect_lines(block)
     return "\n".join(lines) + "\n"
 
@@ -539,53 +471,6 @@ def _reference_lines(ref: dict | None) -> list[str]:
         lines += [f"- {r['term']}: {r['note']}." for r in ref["terms"] if r["note"]]
     lines += [f"- {e['residual_effect']} (truth channel): no term here; {e['why']}."
               for e in ref["not_modelled"]]
-    return lines
-
-
-# Held-out log predictive density per sample below which the report calls the fit poor: the
-# interval likelihood of a model that fits gives each reading a probability near 1 (the
-# embedded open-loop log -0.034, the Encos sine -0.021 nats per sample), while a motion the
-# model cannot follow misses whole dwells (the DC-motor log: -0.53).
-_POOR_ELPD_PER_SAMPLE = -0.2
-
-
-def _motion_model_lines(motion: dict | None) -> list[str]:
-    if not motion:
-        return []
-    lines = ["", "## What the sinusoid misses: motion models on held-out data", ""]
-    if not motion.get("models"):
-        return lines + [f"Not compared: {motion.get('reason')}."]
-    deg = 180.0 / math.pi
-    lines += ["| model | held-out elpd per cycle [nats] | gain over the sinusoid | z |",
-              "|---|---|---|---|"]
-    for m in motion["models"]:
-        name = ("sinusoid (paper 002)" if not m["harmonics"] else
-                "sinusoid + harmonic " + ", ".join(str(k) for k in m["harmonics"]))
-        gain = (f"{m['delta_elpd']:.1f} +- {m['delta_se']:.1f}" if m["harmonics"] else "-")
-        z = f"{m['z']:.1f}" if m.get("z") is not None else "-"
-        lines.append(f"| {name} | {m['elpd_per_cycle']:.3f} | {gain} | {z} |")
-    lines += ["", f"Rule: {motion['rule']}."]
-    chosen = next(m for m in motion["models"] if m["harmonics"] == motion["chosen"])
-    poor = (chosen.get("elpd_per_sample") is not None
-            and chosen["elpd_per_sample"] < _POOR_ELPD_PER_SAMPLE)
-    if poor:
-        lines.append(f"Warning: the best model still predicts the held-out readings poorly "
-                     f"({chosen['elpd_per_sample']:.2f} nats per sample; a model that fits "
-                     "reads each sample with probability near 1, i.e. near 0 nats): the motion "
-                     "is not a sinusoid plus these harmonics (see the dwell posterior-predictive "
-                     "plot).")
-    if not motion["chosen"]:
-        lines.append("Result: no candidate predicts the held-out readings better than the "
-                     "sinusoid" + (" - which itself fits poorly." if poor else
-                                   "; the paper's model stands."))
-        return lines
-    for k, h in motion["harmonics"].items():
-        lines.append(f"Result: harmonic {k} of the motion, amplitude {_fmt_deg(h['amplitude'])}"
-                     f" (c = {_fmt_deg(h['c'])}, s = {_fmt_deg(h['s'])}).")
-    fund = motion["A12_fundamental"]
-    lines.append(f"With it the fundamental's stroke is {fund['median'] * deg:.4f} deg (90 %: "
-                 f"{fund['q05'] * deg:.4f} .. {fund['q95'] * deg:.4f}); delta BIC "
-                 f"{motion['delta_bic']:.1f} (positive favours the model).")
     return lines
 
 
