@@ -74,6 +74,8 @@ class Effect:
         What the term stands for when the truth channel shows no such effect.
     unconfirmed_biases : tuple or None
         ``(quantities, words)``: the estimates that rest on the term being the encoder's.
+    display : tuple
+        ``(factor, axis label)``: the SI value times ``factor`` in the label's unit, for plots.
     """
 
     name = "effect"
@@ -89,6 +91,7 @@ class Effect:
     unconfirmed = None
     unconfirmed_biases = None
     test = ""
+    display = (1.0, "")
     #: start value of the parameter (internal units)
     start = 0.0
 
@@ -147,6 +150,7 @@ class Hysteresis(Effect):
                           "hysteresis stands for the motion at its turning points and the "
                           "fitted motion's stroke is not the shaft's")
     test = "tests/test_lrde_effects.py::test_hysteresis_transition_probabilities_match_a_relay_simulation"
+    display = (180.0 / np.pi, "hysteresis w [deg]")
 
     def bounds(self, duration, dt):
         return [0.0, _HYST_MAX]
@@ -176,6 +180,7 @@ class Drift(Effect):
     of_the_reading = False
     signature = "linear drift of the motion frequency over the log"
     test = "tests/test_lrde_effects.py::test_drift_reading_probabilities_match_simulation"
+    display = (1.0, "drift [1/s]")
 
     def bounds(self, duration, dt):
         return [-_DRIFT_MAX / duration, _DRIFT_MAX / duration]
@@ -235,6 +240,7 @@ class TimeJitter(Effect):
     unconfirmed = ("the truth channel shows no sample-time jitter, so the term stands for "
                    "noise of the motion")
     test = "tests/test_lrde_effects.py::test_time_jitter_reading_probabilities_match_simulation"
+    display = (1e6, "time jitter [us]")
 
     def bounds(self, duration, dt):
         return [0.0, _JITTER_MAX]
