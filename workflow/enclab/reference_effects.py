@@ -23,6 +23,7 @@ from enclab.residuals import effects as residual_effects
 
 __all__ = ["lrde_reference", "references_by_channel"]
 
+
 def lrde_reference(residual_block: Mapping) -> dict:
     """The residual stage's findings on one measured channel as low-resolution model terms.
 
@@ -42,9 +43,10 @@ def lrde_reference(residual_block: Mapping) -> dict:
         ``not_modelled`` (per residual-stage effect without a term: ``residual_effect``,
         ``why`` and ``biases``, the estimates it breaks an assumption of).
 
-    Each effect's class says what it becomes (:meth:`enclab.residuals.effects.Effect.lrde_finding`):
-    e.g. a single missed or extra count becomes the ``count_jump`` term; several become a
-    ``not_modelled`` entry, since the model holds one jump.
+    Each effect's class says what it becomes
+    (:meth:`enclab.residuals.effects.Effect.lrde_finding`): e.g. a single missed or extra count
+    becomes the ``count_jump`` term; several become a ``not_modelled`` entry, since the model
+    holds one jump.
     """
     selection = residual_block.get("selection")
     if not isinstance(selection, Mapping):

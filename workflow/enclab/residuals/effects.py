@@ -189,7 +189,9 @@ class Effect:
     lrde_no_term : str
         Without a counterpart: what the effect does to the low-resolution fit's estimates.
     lrde_biases : tuple of str
-        Without a counterpart: the low-resolution estimates whose assumptions it breaks.
+        Without a counterpart: the low-resolution estimates whose assumptions it breaks (an
+        effect that only shifts the motion's phase, rescales the stroke as read, or distorts
+        the motion as a harmonic would, which the comparison's motion terms cover, breaks none).
     test : str
         The test (``path::name``) that checks the effect against a brute-force simulation.
     """
