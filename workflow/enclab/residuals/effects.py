@@ -56,6 +56,7 @@ __all__ = [
     "ScaleMismatch",
     "Compliance",
     "SofteningCompliance",
+    "InertialTwist",
     "CalibrationMap",
     "SlowDrift",
     "LevelShift",
@@ -846,6 +847,64 @@ class SofteningCompliance(Effect):
                 "softening": -k2 * tmax / k1 if k1 != 0 else float("nan")}
 
 
+class InertialTwist(Effect):
+    """Twist of a compliant shaft that accelerates an inertia: ``theta_eff = theta - c (a - mean a)``.
+
+    A shaft or coupling of stiffness ``k`` between the truth and the measured side, driving an
+    inertia ``J`` on one of them, twists by ``J a / k`` under the angular acceleration ``a``
+    (rad/s^2): ``c = J / k`` (s^2), signed (positive when the measured side is the driven
+    inertia and lags while it is accelerated, negative when it drives). It is the compliance
+    of :class:`Compliance` with the torque the inertia's own, for a log without a torque
+    column. ``a`` is the time derivative of the truth's smoothed velocity, centred on its mean
+    over the log (the quantizer offset holds a constant). Signature: the residual ``measured -
+    truth`` follows the acceleration, largest where the motion turns and zero where it passes
+    at constant speed (a latency's residual follows the speed instead). Interior null (regular
+    chi2_1). The smoothed velocity's derivative is off by a few percent of the acceleration
+    where the motion turns fastest, so a twist of several steps is read to within a few
+    hundredths of a step, not to the exact-model floor.
+
+    On a pure sinusoid about its mean the acceleration is ``-omega^2`` times the angle, so the
+    twist is a scale error there (:class:`ScaleMismatch`): the effect is off by ``default``
+    and tried only when named in ``candidates``.
+    """
+
+    name = "inertial_twist"
+    additive = True
+    param_names = ("c",)
+    order = 13
+    default = False
+    lrde_no_term = ("a twist that follows the acceleration; on a sinusoid it is a fixed fraction "
+                    "of the motion, so it rescales the stroke the encoder sees, which the fit "
+                    "reports as read")
+    test = "tests/test_residual_inertial_twist.py::test_inertial_twist_is_found_on_a_brute_force_simulated_log"
+
+    separated_by = "a motion that is not one sinusoid (its acceleration then is no multiple of its angle)"
+
+    @staticmethod
+    def _acceleration(t, velocity):
+        # the time derivative of the selection's smoothed velocity: the second derivative of
+        # the cubic spline through every sample follows the truth's residual rounding instead
+        # (it read a two-tone motion's twist at half its size)
+        return np.gradient(np.asarray(velocity, dtype=float), t)
+
+    def applicable(self, ctx) -> bool:
+        return ctx.t.size > 2 and float(np.ptp(self._acceleration(ctx.t, ctx.velocity))) > 0
+
+    def bounds(self, ctx):
+        lim = _span(ctx) / float(np.ptp(self._acceleration(ctx.t, ctx.velocity)))
+        return [(-lim, lim)]
+
+    def _column(self, t, velocity):
+        cached = getattr(self, "_cache", None)
+        if cached is None or cached[0] is not velocity:
+            acc = self._acceleration(t, velocity)
+            self._cache = (velocity, acc - acc.mean())
+        return self._cache[1]
+
+    def apply(self, theta, t, velocity, aux, params):
+        return theta - params[0] * self._column(t, velocity)
+
+
 class CalibrationMap(Effect):
     """Smooth calibration map of the measured-side angle: ``theta_eff = theta + m(theta)``.
 
@@ -1395,6 +1454,7 @@ EFFECTS = (
     Backlash,
     Compliance,
     SofteningCompliance,
+    InertialTwist,
     ScaleMismatch,
     AngleHarmonics,
     HarmonicMap,
