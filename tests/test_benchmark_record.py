@@ -1,14 +1,13 @@
 """The benchmark page and its record: tables survive a round trip through the page and a
 fresh clone renders the page that is committed."""
-import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from benchmarks import render_benchmarks as rb
+
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "workflow" / "benchmarks"))
-import render_benchmarks as rb  # noqa: E402
 
 
 def _table(seed):

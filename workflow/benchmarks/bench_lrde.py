@@ -18,8 +18,8 @@ second and the fraction of fits flagged converged.
 
 Usage::
 
-    python workflow/benchmarks/bench_lrde.py --draws 200 --cycles 1 5 20 100 --jobs 2
-    python workflow/benchmarks/bench_lrde.py --draws 10 --cycles 20      # quick
+    PYTHONPATH=workflow python -m benchmarks.bench_lrde --draws 200 --cycles 1 5 20 100 --jobs 2
+    PYTHONPATH=workflow python -m benchmarks.bench_lrde --draws 10 --cycles 20      # quick
 
 Writes ``<out>/lrde_draws.csv``, ``<out>/lrde_summary.csv`` and ``<out>/lrde_rmse.png``.
 """

@@ -7,10 +7,10 @@ chosen model, the trust flags and a digest of the block are recorded with the ti
 
 Usage::
 
-    python workflow/benchmarks/bench_lrde_stage.py --repeats 3
-    PYTHONPATH=<other checkout>/workflow python workflow/benchmarks/bench_lrde_stage.py \\
+    PYTHONPATH=workflow python -m benchmarks.bench_lrde_stage --repeats 3
+    PYTHONPATH=<other checkout>/workflow PYTHONPATH=workflow python -m benchmarks.bench_lrde_stage \\
         --label other   # the same logs with another version of the package
-    python workflow/benchmarks/bench_lrde_stage.py --threads 2 --logs lrde_closed_r01
+    PYTHONPATH=workflow python -m benchmarks.bench_lrde_stage --threads 2 --logs lrde_closed_r01
 
 Writes ``<out>/lrde_stage.csv`` (appends rows).
 """
@@ -20,15 +20,13 @@ import argparse
 import hashlib
 import json
 import pathlib
-import sys
 import time
 import zlib
 
 import pandas as pd
 import yaml
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from provenance import ROOT, stamp  # noqa: E402
+from .helpers import ROOT, stamp
 
 
 def main(argv=None) -> None:

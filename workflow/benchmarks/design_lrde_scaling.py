@@ -16,18 +16,15 @@ to ``results/benchmarks/design_lrde_scaling.csv`` and the laws to
 
 Usage::
 
-    .venv/bin/python workflow/benchmarks/design_lrde_scaling.py --draws 24 --jobs 2
-    .venv/bin/python workflow/benchmarks/design_lrde_scaling.py --quick
+    PYTHONPATH=workflow python -m benchmarks.design_lrde_scaling --draws 24 --jobs 2
+    PYTHONPATH=workflow python -m benchmarks.design_lrde_scaling --quick
     # check a designed setting (one row, no law): 78 cycles at 100 samples per period
-    .venv/bin/python workflow/benchmarks/design_lrde_scaling.py --cycles 78 --spp 100 --draws 24
+    PYTHONPATH=workflow python -m benchmarks.design_lrde_scaling --cycles 78 --spp 100 --draws 24
 """
 from __future__ import annotations
 
 import argparse
 import concurrent.futures
-import datetime
-import platform
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -35,6 +32,8 @@ import pandas as pd
 
 from enclab.design.lrde import fit_law
 from enclab.lrde import fit, model, simulate
+
+from .helpers import provenance
 
 STEP = simulate.ROS_DRILL_STEP
 F_NOMINAL = 20.0
@@ -134,8 +133,7 @@ def main(argv=None) -> None:
             continue
         laws.append({"estimator": est, "quantity": q, **law.to_dict(), **stats})
     laws = pd.DataFrame(laws)
-    stamp = {"date": datetime.date.today().isoformat(), "machine": platform.node(),
-             "command": " ".join([Path(sys.argv[0]).name] + (argv or sys.argv[1:]))}
+    stamp = provenance(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     for frame, name in ((summary, "design_lrde_scaling.csv"), (laws, "design_lrde_laws.csv")):

@@ -14,7 +14,7 @@ joined on (cycles, draw).
 
 Usage::
 
-    python workflow/benchmarks/lrde_oracle_bound.py --draws 200 --cycles 20 --jobs 2
+    PYTHONPATH=workflow python -m benchmarks.lrde_oracle_bound --draws 200 --cycles 20 --jobs 2
 
 Writes ``<out>/lrde_oracle.csv`` (per draw: oracle, eq. 4 averaged and sampling phase gap) and
 prints RMSEs for all draws and split into commensurate / spread sampling.
@@ -28,8 +28,9 @@ import pathlib
 import numpy as np
 import pandas as pd
 
-from bench_lrde import COMMENSURATE_GAP, STEP, sampling_phase_gap, simulate_draw
 from enclab.lrde import dwell, fit
+
+from .bench_lrde import COMMENSURATE_GAP, STEP, sampling_phase_gap, simulate_draw
 
 
 def grid_posterior(t, counts, A_grid, aeq_grid, f_hz, phase, sigma):
@@ -42,7 +43,7 @@ def grid_posterior(t, counts, A_grid, aeq_grid, f_hz, phase, sigma):
     for i in range(0, len(rows), 256):
         a, e = rows[i:i + 256, 0:1], rows[i:i + 256, 1:2]
         z = e + 0.5 * a * sine
-        logp[i:i + 256] = fit._log_interval_prob((counts - z) / s, (counts + 1 - z) / s).sum(1)
+        logp[i:i + 256] = fit.log_interval_probability((counts - z) / s, (counts + 1 - z) / s).sum(1)
     logp = logp.reshape(A.shape)
     post = np.exp(logp - logp.max())
     return post / post.sum()
