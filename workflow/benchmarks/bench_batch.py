@@ -1,4 +1,6 @@
-"""Per-log overhead of the Snakemake jobs on a batch of many small logs.
+"""How much do the Snakemake jobs cost per log on a batch of many small logs?
+
+Per-log overhead of the Snakemake jobs on a batch of many small logs.
 
 Generates N simulated Phantom runs (Colonnese & Okamura protocol: 3 joints, 1 kHz, 15 s by
 default, ``enclab.propagation.simulate.phantom_protocol_run``), a manifest and a configuration in a

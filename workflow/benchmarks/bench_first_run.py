@@ -1,4 +1,6 @@
-"""A newcomer's first run: ``make run`` (and optionally ``make test``) on a fresh clone.
+"""How long does a newcomer's first ``make run`` (and ``make test``) take on a fresh clone?
+
+A newcomer's first run: ``make run`` (and optionally ``make test``) on a fresh clone.
 
 Clones the repository (``--repo``, default this one) at ``--commit`` (default HEAD) into a
 temporary folder and times ``make run`` there, as a new user runs it: the virtual environment

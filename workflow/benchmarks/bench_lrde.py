@@ -1,4 +1,6 @@
-"""Benchmark of the LRDE stroke/bias estimators on simulated draws (paper 002 setting).
+"""How accurate and how calibrated are the LRDE stroke/bias estimators on simulated draws?
+
+Benchmark of the LRDE stroke/bias estimators on simulated draws (paper 002 setting).
 
 Each draw: step 0.09 deg, offset a ~ U(0, step), stroke A12 ~ U(3 step, 5 step) (the n = 2
 band of eq. 6), bias deviation E_b ~ U(-epsilon/2, epsilon/2) (Proposition 1's band, so the

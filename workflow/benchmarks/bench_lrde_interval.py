@@ -1,4 +1,6 @@
-"""Cost of the LRDE likelihood's interval probabilities: gathered by kind or in place.
+"""What do the LRDE likelihood's interval probabilities cost, gathered by kind or in place?
+
+Cost of the LRDE likelihood's interval probabilities: gathered by kind or in place.
 
 ``log(Phi(upper) - Phi(lower))`` of every reading (:mod:`enclab.lrde.effects`) has two
 evaluations: the entries near an interval edge gathered and taken by kind

@@ -1,4 +1,6 @@
-"""MCMC throughput of the LRDE fit: likelihood cost per call, wall time, ESS and ESS per second.
+"""What does the LRDE fit's MCMC cost per likelihood call, per fit and per effective sample?
+
+MCMC throughput of the LRDE fit: likelihood cost per call, wall time, ESS and ESS per second.
 
 Runs the same simulated 20-cycle logs (the setting of ``bench_lrde.py``: step 0.09 deg,
 A12 ~ U(3, 5) step, E_b inside Proposition 1's band, f ~ U(0.9, 1.1) x 20 Hz at 2 kHz,

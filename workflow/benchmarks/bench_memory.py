@@ -1,4 +1,6 @@
-"""Peak memory of the whole workflow on one long truth/measured log, per job and end to end.
+"""What peak memory does the whole workflow reach on one long truth/measured log?
+
+Peak memory of the whole workflow on one long truth/measured log, per job and end to end.
 
 For each ``--samples`` value this script
 

@@ -1,4 +1,6 @@
-"""Challenge benchmark of the residual stage: undeclared effects in simulated two-channel logs.
+"""Does the residual stage name undeclared effects in simulated logs, and only those?
+
+Challenge benchmark of the residual stage: undeclared effects in simulated two-channel logs.
 
 Each log: a 32768-cpr truth channel (rounding) and a 4096-cpr measured channel with a random
 quantizer offset, 1 kHz, 10-15 s, motion a sine, a multi-sine or a random smooth path of peak

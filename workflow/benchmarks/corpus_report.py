@@ -1,4 +1,6 @@
-"""Run the bad-input corpus through the real workflow and print case / expected / got / pass.
+"""Does every case of the bad-input corpus end as expected through the real workflow?
+
+Run the bad-input corpus through the real workflow and print case / expected / got / pass.
 
 The cases are defined in tests/corpus/cases.py (the same ones tests/test_corpus.py asserts);
 this prints the Markdown table of the README's troubleshooting section. About two minutes on

@@ -1,4 +1,6 @@
-"""Proof by simulation of design mode: several budgets, each design on the same random trajectories.
+"""Do the designs that design mode chooses meet their budgets on simulated trajectories?
+
+Proof by simulation of design mode: several budgets, each design on the same random trajectories.
 
 The worked example's device and workspace (config.yaml ``design:``: Phantom Premium 1.5, +-30 deg
 per joint, Section IV motion of 3 deg at 5 +- 0.1 Hz about centres spread over the box, 1 kHz,

@@ -1,4 +1,6 @@
-"""How the low-resolution encoder's stroke and bias precision scale with cycles and sample rate.
+"""How do the low-resolution encoder's stroke and bias precision scale with cycles and rate?
+
+How the low-resolution encoder's stroke and bias precision scale with cycles and sample rate.
 
 Paper 002's setting as in bench_lrde.py: step 0.09 deg, offset a ~ U(0, step), stroke
 A12 ~ U(3, 5) steps, bias deviation E_b inside Proposition 1's band, f ~ 20 Hz x U(0.9, 1.1), white

@@ -1,4 +1,6 @@
-"""Cost of the design search: 3 joints, a 7^3 grid of motion centres, the whole default filter
+"""How long does the design search take on 3 joints, the whole bank and 8 resolutions each?
+
+Cost of the design search: 3 joints, a 7^3 grid of motion centres, the whole default filter
 bank (both derivative orders budgeted, so every filter of ``derivatives.bank`` in every
 architecture is a candidate), 8 candidate resolutions per joint (8^3 combinations).
 

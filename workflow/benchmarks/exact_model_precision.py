@@ -1,5 +1,6 @@
-"""How close is the exact non-white model, filter by filter, once run-to-run scatter is averaged
-away? Many trajectories of one joint of paper 000's protocol, every filter of the configured bank.
+"""How close is the exact non-white model, filter by filter, once run-to-run scatter is averaged?
+
+Many trajectories of one joint of paper 000's protocol, every filter of the configured bank.
 
 Protocol: 1 kHz, 15 s, 3 deg at 5 +- 0.1 Hz, truth at 0.125 mrad re-quantized 8x to 1 mrad
 (``--continuous``: a continuous truth quantized at 1 mrad). One run's derivative-noise std

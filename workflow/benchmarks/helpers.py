@@ -146,17 +146,6 @@ def provenance(args: list[str] | None = None) -> dict:
     return {name: row.at[0, name] for name in PROVENANCE}
 
 
-def append_rows(frame: pd.DataFrame, path: Path, argv: list[str] | None = None) -> pd.DataFrame:
-    """Append ``frame``, stamped (:func:`stamp`), to the CSV at ``path``; the rows written.
-
-    The header is written only when the file is new, so every run adds to the table."""
-    rows = stamp(frame.reset_index(drop=True), argv)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    rows.to_csv(path, mode="a", header=not path.exists(), index=False)
-    return rows
-
-
 def merge_rows(rows: list[dict], path: Path, key, columns=None) -> pd.DataFrame:
     """Add ``rows`` to the CSV at ``path``, replacing its rows with the same ``key`` values.
 

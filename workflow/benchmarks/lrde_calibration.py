@@ -1,4 +1,6 @@
-"""Calibration of the LRDE posterior itself: the true model, no comparison, no pooling.
+"""Is the LRDE posterior itself calibrated when the true model is fitted?
+
+Calibration of the LRDE posterior itself: the true model, no comparison, no pooling.
 
 The effects benchmark (``bench_lrde_effects.py``) measures the stage: coverage there mixes
 the posterior with the model the comparison chose and with pooling. This script separates

@@ -1,4 +1,6 @@
-"""Benchmark of the LRDE stage on closed-loop logs (paper 002's own setting).
+"""How does the LRDE stage do on closed-loop logs (paper 002's own setting)?
+
+Benchmark of the LRDE stage on closed-loop logs (paper 002's own setting).
 
 Each draw is a PID servo tracking a 20 Hz sinusoid with the Ros-Drill encoder (0.09 deg) in
 the loop (:func:`enclab.lrde.simulate.closed_loop_pid_log`, paper 002 Fig. 5), over a grid of

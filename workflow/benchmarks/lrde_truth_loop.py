@@ -1,4 +1,6 @@
-"""Benchmark of the loop between the residual stage and the LRDE fit on truth-channel logs.
+"""Do the residual stage's findings on a truth channel carry into the LRDE fit?
+
+Benchmark of the loop between the residual stage and the LRDE fit on truth-channel logs.
 
 Each draw is a low-resolution log as in ``bench_lrde_effects.py`` (step 0.09 deg, ``A12 ~
 U(3, 5)`` steps, ``E_b`` in Proposition 1's band, f ~ 20 Hz x U(0.9, 1.1) at 2 kHz, position

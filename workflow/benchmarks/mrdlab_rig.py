@@ -1,4 +1,6 @@
-"""MRDLab da Vinci tool as a rig: the CUI output encoder of all 20 runs fitted together.
+"""How well do rig models of the MRDLab tool's CUI output encoder predict held-out runs?
+
+MRDLab da Vinci tool as a rig: the CUI output encoder of all 20 runs fitted together.
 
 The 20 runs of ``Tool_4_Maryland_L_2`` (5 frequencies x 4 reaction-torque levels, the rig
 ``mrdlab_tool4`` of ``data/manifest.real.yaml``) against the back-end motor encoder through the

@@ -1,4 +1,6 @@
-"""Paper 000 acceptance tables from a finished run: measured/PQN and measured/exact std ratios.
+"""Does a finished run reproduce paper 000's measured/PQN and measured/exact std ratios?
+
+Paper 000 acceptance tables from a finished run: measured/PQN and measured/exact std ratios.
 
 Reads ``results/batch/pooled.csv`` (repeat groups pooled, ratios with confidence intervals) and
 prints, and writes under ``results/benchmarks/``:

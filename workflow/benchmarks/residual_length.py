@@ -1,4 +1,6 @@
-"""Residual stage at any length: false effects on clean logs, power at 3x the threshold.
+"""Does the residual stage hold at any length: clean logs named clean, power at 3x threshold?
+
+Residual stage at any length: false effects on clean logs, power at 3x the threshold.
 
 Question: does the selection stay quiet on clean logs and find an effect at 3x its detection
 threshold, at 4e3, 4e4, 4e5 and 4e6 samples, and does no chosen effect leave the residual worse

@@ -1,4 +1,6 @@
-"""Sensors that are not hard quantizers through the residual stage: floor kind, map, lookup table.
+"""Does the residual stage read sensors that are not hard quantizers right?
+
+Sensors that are not hard quantizers through the residual stage: floor kind, map, lookup table.
 
 Question: on a magnetic encoder (1st-4th harmonic error, noise), a resolver (2nd harmonic), a
 potentiometer (nonlinear track, noise) and a servo (filtered output sensor and motor encoder on
