@@ -33,9 +33,9 @@ import numpy as np
 import pandas as pd
 
 from enclab.design.lrde import fit_law
-from enclab.lrde import fit, model, simulate
+from enclab.lrde import fit, simulate
 
-from .helpers import provenance
+from .helpers import open_loop_draw, provenance
 
 STEP = simulate.ROS_DRILL_STEP
 F_NOMINAL = 20.0
@@ -73,15 +73,7 @@ def oracle_median(t, counts, p, rng):
 
 def one_draw(cycles: int, spp: float, draw: int, seed_seq) -> dict:
     sim_seed, fit_seed, grid_seed = seed_seq.spawn(3)
-    rng = np.random.default_rng(sim_seed)
-    f_hz = F_NOMINAL * rng.uniform(0.9, 1.1)
-    a_frac = rng.uniform(0, 1)
-    A12 = rng.uniform(3.0, 5.0) * STEP
-    half_eps = 0.5 * float(model.epsilon(A12, STEP))
-    E_b = rng.uniform(-half_eps, half_eps)
-    bias = E_b + 0.5 * STEP - a_frac * STEP
-    df, p = simulate.open_loop_log(rng, A12=A12, bias=bias, f_hz=f_hz, fs_hz=spp * F_NOMINAL,
-                                   n_cycles=cycles + 1, offset_frac=a_frac, noise_std=NOISE * STEP)
+    df, p = open_loop_draw(np.random.default_rng(sim_seed), cycles, spp * F_NOMINAL, F_NOMINAL, NOISE)
     t, counts = df["t"].to_numpy(), df["counts"].to_numpy()
     row = {"cycles": cycles, "samples_per_period": spp, "draw": draw, "A12_true": p["A12"] / STEP,
            "E_b_true": p["E_b"] / STEP, "n_samples": int(t.size)}

@@ -1,4 +1,4 @@
-"""Shared helpers of the benchmark scripts: provenance, CSV rows, intervals, reference timing.
+"""Shared helpers of the benchmarks: provenance, CSV rows, intervals, reference timing, draws.
 
 ``docs/benchmarks.md`` is generated from ``results/benchmarks/*.csv`` by
 :mod:`benchmarks.render_benchmarks`; every table row there says when, where and how it was
@@ -20,6 +20,8 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+
+from enclab.lrde import model, simulate
 
 PROVENANCE = ("date", "machine", "command")
 PACKAGE = Path(__file__).resolve().parent
@@ -231,6 +233,31 @@ def reference_loop_seconds(n: int = 5_000_000, clock=time.process_time) -> float
 def log_uniform(rng: np.random.Generator, lo: float, hi: float) -> float:
     """One draw, uniform in ``log`` between ``lo`` and ``hi``."""
     return float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
+
+
+def open_loop_draw(rng: np.random.Generator, n_cycles: int, fs_hz: float, f_nominal: float = 20.0,
+                   noise_frac: float = 0.005, truth_frac: float | None = None):
+    """One simulated low-resolution encoder log of the paper-002 setting: ``(df, params)`` of
+    :func:`enclab.lrde.simulate.open_loop_log`.
+
+    Ros-Drill step; frequency ``f_nominal x U(0.9, 1.1)``; offset ``a ~ U(0, step)``;
+    ``A12 ~ U(3, 5) step``; ``E_b`` uniform in Proposition 1's band; position noise
+    ``noise_frac`` step; ``n_cycles + 1`` periods at ``fs_hz``; a truth channel of
+    ``truth_frac`` step when given. The draw order (frequency, offset, stroke, ``E_b``, then
+    the simulator's own draws) is the contract that lets several benchmarks score the same
+    draws from the same seed.
+    """
+    step = simulate.ROS_DRILL_STEP
+    f_hz = f_nominal * rng.uniform(0.9, 1.1)
+    a_frac = rng.uniform(0, 1)
+    A12 = rng.uniform(3.0, 5.0) * step
+    half_eps = 0.5 * float(model.epsilon(A12, step))
+    E_b = rng.uniform(-half_eps, half_eps)
+    bias = E_b + 0.5 * step - a_frac * step
+    return simulate.open_loop_log(rng, A12=A12, bias=bias, f_hz=f_hz, fs_hz=fs_hz,
+                                  n_cycles=n_cycles + 1, offset_frac=a_frac,
+                                  noise_std=noise_frac * step,
+                                  truth_step=None if truth_frac is None else truth_frac * step)
 
 
 def parse_shard(text: str) -> tuple[int, int]:

@@ -32,7 +32,8 @@ import pandas as pd
 
 from enclab.lrde import dwell, fit
 
-from .bench_lrde import COMMENSURATE_GAP, STEP, sampling_phase_gap, simulate_draw
+from .bench_lrde import COMMENSURATE_GAP, STEP, sampling_phase_gap
+from .helpers import open_loop_draw
 
 
 def grid_posterior(t, counts, A_grid, aeq_grid, f_hz, phase, sigma):
@@ -58,7 +59,7 @@ def weighted_median(values, weights):
 
 
 def one_draw(rng, n_cycles, fs_hz, f_nominal, noise_frac):
-    df, p = simulate_draw(rng, n_cycles, fs_hz, f_nominal, noise_frac)
+    df, p = open_loop_draw(rng, n_cycles, fs_hz, f_nominal, noise_frac)
     A12, f_hz = p["A12"], p["f_hz"]
     t, c = df["t"].to_numpy(), df["counts"].to_numpy()
     A_true, aeq_true = A12 / STEP, p["a_eq"] / STEP
