@@ -1,7 +1,5 @@
 """Does the LRDE effect comparison name the right effect, and do the intervals hold?
 
-Benchmark of the LRDE effect comparison: is the right effect named, do the intervals hold?
-
 Each draw is a benchmark log of ``bench_lrde.py`` (step 0.09 deg, ``a ~ U(0, step)``,
 ``A12 ~ U(3, 5) step``, ``E_b`` in Proposition 1's band, f ~ 20 Hz x U(0.9, 1.1) at 2 kHz,
 position noise 0.005 step, random phase) read through

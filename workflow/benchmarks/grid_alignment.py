@@ -1,7 +1,6 @@
 """How does a run's sub-step centre move its measured/exact ratio, and where should repeats go?
 
-How the sub-step centre of a run moves its measured/exact ratio, and how a repeat group should
-place its runs: grid-aligned, independent uniform, or stratified over one step.
+A repeat group may place its runs grid-aligned, independent uniform, or stratified over one step.
 
 A single joint follows paper 000's protocol (1 kHz, 15 s, 3 deg sinusoid at a frequency drawn in
 5 +- 0.1 Hz, truth at 0.125 mrad) and is re-quantized 8x to a 1 mrad step. With a constant

@@ -1,6 +1,6 @@
 """Which benchmark logs carry evidence of their effect at all?
 
-Which benchmark logs carry evidence of their effect at all: the oracle's model comparison.
+The oracle's model comparison.
 
 For every draw of ``bench_lrde_effects.py`` with a sized effect (``hysteresis``, ``drift``,
 ``harmonic``), the log is simulated again from its seed and the score the comparison uses (the

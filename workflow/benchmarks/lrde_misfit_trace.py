@@ -1,7 +1,5 @@
 """Are effects outside the LRDE catalogue flagged and placed, rather than misnamed?
 
-Effects outside the LRDE catalogue: are they flagged and placed, rather than misnamed?
-
 The effect comparison (:func:`enclab.lrde.compare.compare_effect_models`) can only name the
 terms it knows. An effect it does not know is absorbed by the nearest candidates (a misplaced
 edge by a dead band plus a 3rd harmonic, say) and, if nothing else looks, reported under a

@@ -1,6 +1,6 @@
 """How well could *any* estimator do on the bench_lrde.py draws?
 
-How well could *any* estimator do? An oracle posterior for the bench_lrde.py draws.
+An oracle posterior for the bench_lrde.py draws.
 
 The oracle knows everything but the stroke and the bias: the frequency, the phase and the
 jitter are fixed at their true values, and the posterior of ``(A12, a_eq)`` under flat priors

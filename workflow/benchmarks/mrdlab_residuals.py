@@ -1,6 +1,6 @@
 """What makes the MRDLab da Vinci tool's output encoders differ from its motor encoder?
 
-MRDLab da Vinci tool rig: what makes the output encoders differ from the motor encoder?
+MRDLab da Vinci tool rig: output encoders against the motor encoder.
 
 The 8192-cpr CUI output encoder (and the 4000-cpr front-end encoder) against the back-end motor
 encoder divided by the 35:1 gear ratio (the truth; data/manifest.real.yaml, entry
