@@ -1,14 +1,13 @@
 """The benchmark page and its record: tables survive a round trip through the page and a
 fresh clone renders the page that is committed."""
-import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from benchmarks import render_benchmarks as rb
+
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "workflow" / "benchmarks"))
-import render_benchmarks as rb  # noqa: E402
 
 
 def _table(seed):
@@ -74,3 +73,22 @@ def test_a_fresh_checkout_restores_the_record_and_renders_the_same_page(tmp_path
 def test_the_committed_page_is_the_committed_record_rendered():
     record = ROOT / "docs" / "benchmarks"
     assert rb.render(record) == (ROOT / "docs" / "benchmarks.md").read_text(encoding="utf-8")
+
+
+def test_rows_with_the_scripts_old_command_form_render_and_record_in_the_module_form(tmp_path):
+    # A run started before the benchmarks were a package records the script's path; the page
+    # and the record show the command that reruns it, with every other cell as it was.
+    bench, record = tmp_path / "results", tmp_path / "record"
+    bench.mkdir()
+    table = _table(7).assign(command=["python workflow/benchmarks/residual_length.py --lengths 4000"] * 2
+                             + ["PYTHONPATH=workflow python -m benchmarks.residual_length --lengths 4000"] * 3)
+    table.to_csv(bench / "residual_length.csv", index=False)
+    page = rb.render(bench)
+    assert "workflow/benchmarks/residual_length.py" not in page
+    assert page.count("`PYTHONPATH=workflow python -m benchmarks.residual_length --lengths 4000`") == 2
+    rb.keep_record(bench, record)
+    kept = pd.read_csv(record / "residual_length.csv")
+    assert set(kept["command"]) == {"PYTHONPATH=workflow python -m benchmarks.residual_length --lengths 4000"}
+    pd.testing.assert_frame_equal(kept.drop(columns="command"), pd.read_csv(bench / "residual_length.csv")
+                                  .drop(columns="command"))
+    assert rb.render(record) == page

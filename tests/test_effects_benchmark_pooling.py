@@ -1,13 +1,9 @@
 """Pooling an earlier summary of the effects benchmark with new draws gives the summary of all
 draws: counts add, intervals come from the sums, the earlier threshold is kept."""
-import sys
-from pathlib import Path
-
 import numpy as np
 import pandas as pd
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "workflow" / "benchmarks"))
-import bench_lrde_effects as bench  # noqa: E402
+from benchmarks import bench_lrde_effects as bench
 
 
 def _draws(rng, n_per_case):

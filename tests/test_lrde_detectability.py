@@ -1,15 +1,10 @@
 """The oracle point of the detectability analysis is the simulator's truth in the model's frame."""
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "workflow" / "benchmarks"))
-import lrde_detectability as det  # noqa: E402
-from bench_lrde_effects import STEP, simulate_case  # noqa: E402
-
-from enclab.lrde import compare, fit  # noqa: E402
+from benchmarks import lrde_detectability as det
+from benchmarks.bench_lrde_effects import STEP, simulate_case
+from enclab.lrde import compare, fit
 
 
 @pytest.mark.parametrize("case, seed", [("drift", 5), ("hysteresis", 6), ("harmonic", 7)])

@@ -1,4 +1,6 @@
-"""Per-log overhead of the Snakemake jobs on a batch of many small logs.
+"""How much do the Snakemake jobs cost per log on a batch of many small logs?
+
+Per-log overhead of the Snakemake jobs on a batch of many small logs.
 
 Generates N simulated Phantom runs (Colonnese & Okamura protocol: 3 joints, 1 kHz, 15 s by
 default, ``enclab.propagation.simulate.phantom_protocol_run``), a manifest and a configuration in a
@@ -48,8 +50,8 @@ whose outputs differ is reported as such (``identical`` column).
 
 Usage::
 
-    nice .venv/bin/python workflow/benchmarks/bench_batch.py               # N=500, both modes
-    nice .venv/bin/python workflow/benchmarks/bench_batch.py --n 100 --modes batched
+    PYTHONPATH=workflow nice python -m benchmarks.bench_batch               # N=500, both modes
+    PYTHONPATH=workflow nice python -m benchmarks.bench_batch --n 100 --modes batched
 """
 from __future__ import annotations
 
@@ -70,7 +72,8 @@ import numpy as np
 import pandas as pd
 import yaml
 
-ROOT = Path(__file__).resolve().parents[2]
+from .helpers import ROOT, child_env, module_argv, write_performance_section
+
 SMALL_BANK = {"d": [1, 2], "n": [1, 2], "fc_hz": [50, 100],
               "discretization": ["exponential", "bilinear"]}
 MODES = ("per-rule", "batched")
@@ -155,7 +158,7 @@ def _timed(commands: list[list[str]], cwd: Path, logs: list[Path]) -> tuple[floa
     start = time.perf_counter()
     handles = [open(log, "w") for log in logs]
     procs = [subprocess.Popen(command, cwd=cwd, stdout=handle, stderr=subprocess.STDOUT,
-                              env=dict(os.environ, MPLBACKEND="Agg"))
+                              env=child_env(MPLBACKEND="Agg"))
              for command, handle in zip(commands, handles)]
     codes = [proc.wait() for proc in procs]
     wall = time.perf_counter() - start
@@ -177,9 +180,6 @@ def _jobs(log: Path) -> int | None:
 
 def write_performance_rows(table: pd.DataFrame, path: Path) -> None:
     """The ``batch`` section of the project's performance table (bench_performance.py)."""
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    import bench_performance
-
     rows = []
     for _, r in table.iterrows():
         workflow = not r["mode"].startswith("in-process")
@@ -203,7 +203,7 @@ def write_performance_rows(table: pd.DataFrame, path: Path) -> None:
                       + f"wall {r['wall_per_log_s']:.3f} s per log, {int(r['jobs'])} "
                       f"jobs, outputs identical: {r['identical']}, {int(r['cores'])} cores, "
                       f"load {r['loadavg_1min']}")})
-    bench_performance.write_section(rows, path)
+    write_performance_section(rows, path)
 
 
 def main(argv: list[str] | None = None) -> pd.DataFrame:
@@ -239,7 +239,7 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
     load = [os.getloadavg()[0]]
     rows = []
 
-    wall, cpu, rc = _timed([[sys.executable, __file__, "--in-process", str(work),
+    wall, cpu, rc = _timed([module_argv("bench_batch") + ["--in-process", str(work),
                              str(work / "in_process")]], ROOT, [work / "in_process.log"])
     if rc != 0:
         raise SystemExit(f"in-process run failed, see {work / 'in_process.log'}")
@@ -250,7 +250,7 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
     load.append(os.getloadavg()[0])
 
     parallel = [work / f"in_process_{k}" for k in range(args.cores)]
-    wall, cpu, rc = _timed([[sys.executable, __file__, "--in-process", str(work), str(out),
+    wall, cpu, rc = _timed([module_argv("bench_batch") + ["--in-process", str(work), str(out),
                              "--share", str(k), str(args.cores)]
                             for k, out in enumerate(parallel)], ROOT,
                            [out.with_suffix(".log") for out in parallel])

@@ -1,4 +1,6 @@
-"""A newcomer's first run: ``make run`` (and optionally ``make test``) on a fresh clone.
+"""How long does a newcomer's first ``make run`` (and ``make test``) take on a fresh clone?
+
+A newcomer's first run: ``make run`` (and optionally ``make test``) on a fresh clone.
 
 Clones the repository (``--repo``, default this one) at ``--commit`` (default HEAD) into a
 temporary folder and times ``make run`` there, as a new user runs it: the virtual environment
@@ -14,10 +16,10 @@ Rows appended to ``results/benchmarks/first_run.csv`` (times in s): ``date``, ``
 
 Usage::
 
-    .venv/bin/python workflow/benchmarks/bench_first_run.py
-    .venv/bin/python workflow/benchmarks/bench_first_run.py --commit 40d78c3 --test
-    .venv/bin/python workflow/benchmarks/bench_first_run.py --quick   # 4 logs, ~1 CPU-minute
-    .venv/bin/python workflow/benchmarks/bench_first_run.py --smk-args '--set-threads lrde_fit=1'
+    PYTHONPATH=workflow python -m benchmarks.bench_first_run
+    PYTHONPATH=workflow python -m benchmarks.bench_first_run --commit 40d78c3 --test
+    PYTHONPATH=workflow python -m benchmarks.bench_first_run --quick   # 4 logs, ~1 CPU-minute
+    PYTHONPATH=workflow python -m benchmarks.bench_first_run --smk-args '--set-threads lrde_fit=1'
 """
 from __future__ import annotations
 
@@ -34,7 +36,8 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
+from .helpers import ROOT
+
 QUICK_LOGS = "[phantom_c00_r01,phantom_c01_r01,res_clean_r01,lrde_open_r01]"
 _STAMP = re.compile(r"^\[(\w{3} \w{3} +\d+ \d\d:\d\d:\d\d \d{4})\]$")
 

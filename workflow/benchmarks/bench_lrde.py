@@ -1,4 +1,6 @@
-"""Benchmark of the LRDE stroke/bias estimators on simulated draws (paper 002 setting).
+"""How accurate and how calibrated are the LRDE stroke/bias estimators on simulated draws?
+
+Benchmark of the LRDE stroke/bias estimators on simulated draws (paper 002 setting).
 
 Each draw: step 0.09 deg, offset a ~ U(0, step), stroke A12 ~ U(3 step, 5 step) (the n = 2
 band of eq. 6), bias deviation E_b ~ U(-epsilon/2, epsilon/2) (Proposition 1's band, so the
@@ -18,8 +20,8 @@ second and the fraction of fits flagged converged.
 
 Usage::
 
-    python workflow/benchmarks/bench_lrde.py --draws 200 --cycles 1 5 20 100 --jobs 2
-    python workflow/benchmarks/bench_lrde.py --draws 10 --cycles 20      # quick
+    PYTHONPATH=workflow python -m benchmarks.bench_lrde --draws 200 --cycles 1 5 20 100 --jobs 2
+    PYTHONPATH=workflow python -m benchmarks.bench_lrde --draws 10 --cycles 20      # quick
 
 Writes ``<out>/lrde_draws.csv``, ``<out>/lrde_summary.csv`` and ``<out>/lrde_rmse.png``.
 """
@@ -34,7 +36,9 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from enclab.lrde import dwell, fit, model, simulate
+from enclab.lrde import dwell, fit, simulate
+
+from .helpers import open_loop_draw
 
 STEP = simulate.ROS_DRILL_STEP
 # Draws whose pooled sampling phases leave a gap above this (in samples) count as
@@ -42,26 +46,8 @@ STEP = simulate.ROS_DRILL_STEP
 COMMENSURATE_GAP = 0.5
 
 
-def simulate_draw(rng, n_cycles, fs_hz, f_nominal, noise_frac, truth_frac=None):
-    """One benchmark log: ``(df, params)`` of :func:`enclab.lrde.simulate.open_loop_log`.
-
-    The draw order (frequency, offset, stroke, E_b, then the simulator's own draws) is the
-    contract that lets other scripts (lrde_oracle_bound.py) score the same draws.
-    """
-    f_hz = f_nominal * rng.uniform(0.9, 1.1)
-    a_frac = rng.uniform(0, 1)
-    A12 = rng.uniform(3.0, 5.0) * STEP
-    half_eps = 0.5 * float(model.epsilon(A12, STEP))
-    E_b = rng.uniform(-half_eps, half_eps)
-    bias = E_b + 0.5 * STEP - a_frac * STEP
-    return simulate.open_loop_log(rng, A12=A12, bias=bias, f_hz=f_hz, fs_hz=fs_hz,
-                                  n_cycles=n_cycles + 1, offset_frac=a_frac,
-                                  noise_std=noise_frac * STEP,
-                                  truth_step=None if truth_frac is None else truth_frac * STEP)
-
-
 def one_draw(rng, n_cycles, fs_hz, f_nominal, noise_frac, fit_seed, sampler, truth_frac=None):
-    df, p = simulate_draw(rng, n_cycles, fs_hz, f_nominal, noise_frac, truth_frac)
+    df, p = open_loop_draw(rng, n_cycles, fs_hz, f_nominal, noise_frac, truth_frac)
     f_hz, A12, E_b = p["f_hz"], p["A12"], p["E_b"]
     t, c = df["t"].to_numpy(), df["counts"].to_numpy()
     truth = None if truth_frac is None else df["truth_counts"].to_numpy() * truth_frac * STEP

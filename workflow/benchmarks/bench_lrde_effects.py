@@ -1,4 +1,4 @@
-"""Benchmark of the LRDE effect comparison: is the right effect named, do the intervals hold?
+"""Does the LRDE effect comparison name the right effect, and do the intervals hold?
 
 Each draw is a benchmark log of ``bench_lrde.py`` (step 0.09 deg, ``a ~ U(0, step)``,
 ``A12 ~ U(3, 5) step``, ``E_b`` in Proposition 1's band, f ~ 20 Hz x U(0.9, 1.1) at 2 kHz,
@@ -43,13 +43,13 @@ every case for the confident-miss rate.
 
 Usage::
 
-    python workflow/benchmarks/bench_lrde_effects.py --draws 100 --clean-draws 200 \\
+    PYTHONPATH=workflow python -m benchmarks.bench_lrde_effects --draws 100 --clean-draws 200 \\
         --cycles 20 100
-    python workflow/benchmarks/bench_lrde_effects.py --draws 10 --clean-draws 20 --cycles 20
-    python workflow/benchmarks/bench_lrde_effects.py --cycles 20 --shard 1/2   # half of a run
-    python workflow/benchmarks/bench_lrde_effects.py --redo some_draws.csv --out redone
-    python workflow/benchmarks/bench_lrde_effects.py --from-draws all.csv redone/lrde_effects_draws.csv
-    python workflow/benchmarks/bench_lrde_effects.py --from-draws more/lrde_effects_draws.csv \\
+    PYTHONPATH=workflow python -m benchmarks.bench_lrde_effects --draws 10 --clean-draws 20 --cycles 20
+    PYTHONPATH=workflow python -m benchmarks.bench_lrde_effects --cycles 20 --shard 1/2   # half of a run
+    PYTHONPATH=workflow python -m benchmarks.bench_lrde_effects --redo some_draws.csv --out redone
+    PYTHONPATH=workflow python -m benchmarks.bench_lrde_effects --from-draws all.csv redone/lrde_effects_draws.csv
+    PYTHONPATH=workflow python -m benchmarks.bench_lrde_effects --from-draws more/lrde_effects_draws.csv \\
         --pool-with docs/benchmarks/lrde_effects_summary.csv    # continue a run kept as a summary
 
 Writes ``<out>/lrde_effects_draws.csv`` and ``<out>/lrde_effects_summary.csv``.
@@ -58,27 +58,22 @@ from __future__ import annotations
 
 import argparse
 import pathlib
-import sys
 import time
 
 import numpy as np
 import pandas as pd
 from scipy.optimize import minimize
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from provenance import ROOT, stamp  # noqa: E402
 
-from enclab.core.allocator import keep_freed_memory  # noqa: E402
-from enclab.lrde import compare, effects, fit, model, simulate  # noqa: E402
+from enclab.core.allocator import keep_freed_memory
+from enclab.lrde import compare, effects, fit, model, simulate
+
+from .helpers import ROOT, log_uniform, stamp, wilson
 
 STEP = simulate.ROS_DRILL_STEP
 CASES = ("clean", "hysteresis", "drift", "count_jump", "harmonic", "noise")
 RIGHT = {"clean": None, "hysteresis": "hysteresis", "drift": "drift",
          "count_jump": "count_jump", "harmonic": "harmonic3", "noise": None}
-
-
-def _log_uniform(rng, lo, hi):
-    return float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
 
 
 def simulate_case(rng, case, n_cycles, fs_hz=2000.0, f_nominal=20.0, noise_frac=0.005):
@@ -102,10 +97,10 @@ def simulate_case(rng, case, n_cycles, fs_hz=2000.0, f_nominal=20.0, noise_frac=
     size = 0.0
     e_b_ref = E_b
     if case == "hysteresis":
-        size = _log_uniform(rng, 1 / 50, 1 / 5)
+        size = log_uniform(rng, 1 / 50, 1 / 5)
         kw["hysteresis"] = size * STEP
     elif case == "drift":
-        size = _log_uniform(rng, 0.005, 0.03)
+        size = log_uniform(rng, 0.005, 0.03)
         kw["drift"] = rng.choice([-1.0, 1.0]) * size / t[-1]
     elif case == "count_jump":
         index = int(rng.uniform(0.25, 0.75) * t.size)
@@ -114,7 +109,7 @@ def simulate_case(rng, case, n_cycles, fs_hz=2000.0, f_nominal=20.0, noise_frac=
         if index < t.size - index:  # the later segment is the longer one: its frame
             e_b_ref = E_b - STEP
     elif case == "harmonic":
-        size = _log_uniform(rng, 0.01, 0.1)
+        size = log_uniform(rng, 0.01, 0.1)
         ph3 = rng.uniform(-np.pi, np.pi)
         kw["harmonics"] = {3: (size * STEP * np.cos(ph3), size * STEP * np.sin(ph3))}
     elif case == "noise":
@@ -131,7 +126,8 @@ def simulate_case(rng, case, n_cycles, fs_hz=2000.0, f_nominal=20.0, noise_frac=
                        "phase": phase, "a_eq": a_eq, "simulator": kw}
 
 
-def _interval(result, name):
+def interval(result, name):
+    """The 90 % interval of ``name`` in a fit ``result``; ``E_b`` from ``a_eq``'s."""
     if name == "E_b":
         q = result.summary["a_eq"]
         return q["q05"] - 0.5 * STEP, q["q95"] - 0.5 * STEP
@@ -187,7 +183,7 @@ def one_draw(case, n_cycles, seed, sampler):
     row["pooled"] = after is not pick
     for label, r in (("before", before), ("after", after), ("pick", pick)):
         for name in ("A12", "E_b"):
-            lo, hi = _interval(r, name)
+            lo, hi = interval(r, name)
             true = row[f"{name}_true"]
             row[f"{name}_{label}_q05"], row[f"{name}_{label}_q95"] = lo, hi
             row[f"{name}_{label}_cover"] = bool(lo <= true <= hi)
@@ -251,16 +247,6 @@ def rerun_draws(ap, args, one, path, show) -> pd.DataFrame:
         draws = stamp(pd.DataFrame(rows))
     draws.to_csv(path, index=False)
     return draws
-
-
-def wilson(k, n, z=1.96):
-    """Wilson score interval of a binomial proportion ``k / n``."""
-    if n == 0:
-        return (np.nan, np.nan)
-    p = k / n
-    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return (centre - half, centre + half)
 
 
 def threshold(size, named):

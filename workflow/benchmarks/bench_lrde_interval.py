@@ -1,4 +1,6 @@
-"""Cost of the LRDE likelihood's interval probabilities: gathered by kind or in place.
+"""What do the LRDE likelihood's interval probabilities cost, gathered by kind or in place?
+
+Cost of the LRDE likelihood's interval probabilities: gathered by kind or in place.
 
 ``log(Phi(upper) - Phi(lower))`` of every reading (:mod:`enclab.lrde.effects`) has two
 evaluations: the entries near an interval edge gathered and taken by kind
@@ -11,8 +13,8 @@ pick, alternating them so that the machine's drift hits all alike; times are med
 
 Usage::
 
-    python workflow/benchmarks/bench_lrde_interval.py
-    python workflow/benchmarks/bench_lrde_interval.py --rounds 21 --out results/benchmarks
+    PYTHONPATH=workflow python -m benchmarks.bench_lrde_interval
+    PYTHONPATH=workflow python -m benchmarks.bench_lrde_interval --rounds 21 --out results/benchmarks
 
 Writes ``<out>/lrde_interval.csv``.
 """
@@ -20,14 +22,12 @@ from __future__ import annotations
 
 import argparse
 import pathlib
-import sys
 import time
 
 import numpy as np
 import pandas as pd
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from provenance import ROOT, stamp  # noqa: E402
+from .helpers import ROOT, stamp
 
 NOISE_STEPS = (0.01, 0.02, 0.03, 0.04, 0.05, 0.06, 0.08, 0.1, 0.3)
 SHAPES = ((1, 2500), (16, 2000))
@@ -55,18 +55,19 @@ def main(argv=None) -> None:
         for shape in SHAPES:
             u = rng.uniform(0.0, 1.0, shape)
             lower, upper = -u / s, (1.0 - u) / s
-            near = (lower >= -effects._DEEP) | (upper <= effects._DEEP)
+            near = (lower >= -effects.INTERVAL_DEPTH) | (upper <= effects.INTERVAL_DEPTH)
             keep = np.flatnonzero(near)
 
             def gathered():
-                idx = np.flatnonzero((lower >= -effects._DEEP) | (upper <= effects._DEEP))
-                return effects._log_interval_sparse(lower.ravel()[idx], upper.ravel()[idx])
+                idx = np.flatnonzero((lower >= -effects.INTERVAL_DEPTH) | (upper <= effects.INTERVAL_DEPTH))
+                return effects.log_interval_probability(lower.ravel()[idx], upper.ravel()[idx],
+                                                        "gathered")
 
             def in_place():
-                return effects._log_interval_dense(lower.ravel(), upper.ravel())
+                return effects.log_interval_probability(lower.ravel(), upper.ravel(), "in_place")
 
             def picked():
-                return effects._log_interval_rows(lower, upper)
+                return effects.log_interval_probability(lower, upper, "rows")
 
             dense_rows = np.where(near, in_place().reshape(shape), 0.0).sum(axis=1)
             sparse_rows = np.bincount(keep // shape[1], weights=gathered(),
@@ -84,7 +85,7 @@ def main(argv=None) -> None:
                          "in_place_ms": 1e3 * med["in_place"],
                          "picked_ms": 1e3 * med["picked"],
                          "in_place_over_gathered": med["in_place"] / med["gathered"],
-                         "picked_path": "in place" if near.mean() >= effects._DENSE_SHARE
+                         "picked_path": "in place" if near.mean() >= effects.INTERVAL_DENSE_SHARE
                          else "gathered",
                          "max_row_difference": float(np.max(np.abs(dense_rows - sparse_rows)))})
             print(rows[-1], flush=True)

@@ -1,4 +1,6 @@
-"""Wall time of the whole LRDE stage (fits, effect comparison, figures) per embedded log.
+"""How long does the whole LRDE stage take per embedded log?
+
+Wall time of the whole LRDE stage (fits, effect comparison, figures) per embedded log.
 
 Every log of the manifest whose ``analysis.stages`` holds ``lrde`` is ingested and run through
 :func:`enclab.lrde.pipeline.analyse_lrde_log` with ``config.yaml``'s ``lrde`` settings (and
@@ -7,10 +9,10 @@ chosen model, the trust flags and a digest of the block are recorded with the ti
 
 Usage::
 
-    python workflow/benchmarks/bench_lrde_stage.py --repeats 3
-    PYTHONPATH=<other checkout>/workflow python workflow/benchmarks/bench_lrde_stage.py \\
+    PYTHONPATH=workflow python -m benchmarks.bench_lrde_stage --repeats 3
+    PYTHONPATH=../other-checkout/workflow:workflow python -m benchmarks.bench_lrde_stage \\
         --label other   # the same logs with another version of the package
-    python workflow/benchmarks/bench_lrde_stage.py --threads 2 --logs lrde_closed_r01
+    PYTHONPATH=workflow python -m benchmarks.bench_lrde_stage --threads 2 --logs lrde_closed_r01
 
 Writes ``<out>/lrde_stage.csv`` (appends rows).
 """
@@ -19,16 +21,15 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import os
 import pathlib
-import sys
 import time
 import zlib
 
 import pandas as pd
 import yaml
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from provenance import ROOT, stamp  # noqa: E402
+from .helpers import ROOT, stamp
 
 
 def main(argv=None) -> None:
@@ -75,7 +76,9 @@ def main(argv=None) -> None:
                 fig.clear()
             model = (block.get("model") or {}).get("chosen")
             trust = block.get("trust") or {}
-            rows.append({"label": args.label, "package": str(pathlib.Path(enclab.__file__).parent),
+            # relative to the repository: another checkout's package shows as ../<checkout>/...
+            package = os.path.relpath(pathlib.Path(enclab.__file__).parent, ROOT)
+            rows.append({"label": args.label, "package": package,
                          "log_id": meta["log_id"], "samples": len(df), "threads": args.threads, "repeat": r,
                          "wall_s": wall, "model": model,
                          "A12_trusted": (trust.get("A12") or {}).get("trusted"),

@@ -1,4 +1,6 @@
-"""MCMC throughput of the LRDE fit: likelihood cost per call, wall time, ESS and ESS per second.
+"""What does the LRDE fit's MCMC cost per likelihood call, per fit and per effective sample?
+
+MCMC throughput of the LRDE fit: likelihood cost per call, wall time, ESS and ESS per second.
 
 Runs the same simulated 20-cycle logs (the setting of ``bench_lrde.py``: step 0.09 deg,
 A12 ~ U(3, 5) step, E_b inside Proposition 1's band, f ~ U(0.9, 1.1) x 20 Hz at 2 kHz,
@@ -16,9 +18,9 @@ vectorised log-likelihood call (16 walkers near the posterior, median of 300 cal
 
 Usage::
 
-    git worktree add --detach /tmp/enclab-before <commit>
-    python workflow/benchmarks/bench_lrde_throughput.py --draws 10 \\
-        --impl 'before=/tmp/enclab-before/workflow:{"n_steps": 400, "n_burn": 400}' \\
+    git worktree add --detach ../enclab-before <commit>
+    PYTHONPATH=workflow python -m benchmarks.bench_lrde_throughput --draws 10 \\
+        --impl 'before=../enclab-before/workflow:{"n_steps": 400, "n_burn": 400}' \\
         --impl 'after=workflow:{"n_steps": 250, "n_burn": 250}'
 
 Writes ``<out>/lrde_throughput.csv`` (one row per implementation and draw) and
@@ -36,13 +38,14 @@ import textwrap
 
 import pandas as pd
 
+from .helpers import write_performance_section
+
 _WORKER = textwrap.dedent('''
     import json, sys, time
     import numpy as np
-    sys.path.insert(0, sys.argv[1])
-    from enclab.lrde import fit, model, simulate
-    settings = json.loads(sys.argv[2]); seed = int(sys.argv[3]); draws = int(sys.argv[4])
-    cycles = int(sys.argv[5])
+    from enclab.lrde import fit, model, simulate  # the implementation on PYTHONPATH
+    settings = json.loads(sys.argv[1]); seed = int(sys.argv[2]); draws = int(sys.argv[3])
+    cycles = int(sys.argv[4])
     STEP = simulate.ROS_DRILL_STEP
     rows = []
     for d, child in enumerate(np.random.SeedSequence(seed).spawn(draws)):
@@ -82,9 +85,11 @@ _WORKER = textwrap.dedent('''
 
 
 def run_impl(name, path, settings, seed, draws, cycles):
-    out = subprocess.run([sys.executable, "-c", _WORKER, str(path), json.dumps(settings),
+    # PYTHONPATH comes before the installed package: the child imports the enclab of ``path``.
+    out = subprocess.run([sys.executable, "-c", _WORKER, json.dumps(settings),
                           str(seed), str(draws), str(cycles)],
-                         check=True, capture_output=True, text=True)
+                         check=True, capture_output=True, text=True,
+                         env=dict(os.environ, PYTHONPATH=str(path)))
     rows = json.loads(out.stdout.strip().splitlines()[-1])
     return [r | {"impl": name, "settings": json.dumps(settings, sort_keys=True)} for r in rows]
 
@@ -99,9 +104,6 @@ def parse_impl(text):
 
 def write_performance_rows(summary, table, args, path):
     """The ``mcmc`` section of the project's performance table (bench_performance.py)."""
-    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-    import bench_performance
-
     load = os.getloadavg()[0]
     rows = []
     for _, s in summary.iterrows():
@@ -119,7 +121,7 @@ def write_performance_rows(summary, table, args, path):
                       f"ESS/s {s['ess_per_s_median']:.0f}, R-hat max {s['rhat_max']:.4f}, "
                       f"likelihood call {s['likelihood_call_ms_median']:.3f} ms; "
                       f"settings {mine['settings'].iloc[0]}; load avg {load:.1f}")})
-    bench_performance.write_section(rows, path)
+    write_performance_section(rows, path)
 
 
 def main(argv=None):

@@ -1,4 +1,6 @@
-"""Peak memory of the whole workflow on one long truth/measured log, per job and end to end.
+"""What peak memory does the whole workflow reach on one long truth/measured log?
+
+Peak memory of the whole workflow on one long truth/measured log, per job and end to end.
 
 For each ``--samples`` value this script
 
@@ -12,7 +14,7 @@ For each ``--samples`` value this script
 3. reads each job's own peak (``max_rss`` of the rule's Snakemake benchmark file).
 
 Rows go to ``results/benchmarks/performance.csv`` (section ``workflow``, one case per log
-length; :func:`bench_performance.write_section`), with the 1.5 GB target. A run that fails
+length; :func:`benchmarks.helpers.write_performance_section`), with the 1.5 GB target. A run that fails
 (e.g. a refused log) is recorded with the one-line reason of its job log.
 
 With ``--ingest-only`` only the ingest stage runs, in a child process under GNU ``time``
@@ -20,8 +22,8 @@ With ``--ingest-only`` only the ingest stage runs, in a child process under GNU 
 
 Usage::
 
-    nice python workflow/benchmarks/bench_memory.py --samples 3000000
-    nice python workflow/benchmarks/bench_memory.py --samples 30000000 --ingest-only
+    PYTHONPATH=workflow nice python -m benchmarks.bench_memory --samples 3000000
+    PYTHONPATH=workflow nice python -m benchmarks.bench_memory --samples 30000000 --ingest-only
 """
 from __future__ import annotations
 
@@ -36,8 +38,8 @@ import sys
 import numpy as np
 import yaml
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from bench_performance import COLUMNS, OUT_DIR, ROOT, TARGET_RSS_MB, write_section  # noqa: E402,F401
+from .helpers import RESULTS as OUT_DIR
+from .helpers import ROOT, TARGET_RSS_MB, write_performance_section
 
 WORK = OUT_DIR / "memory"
 FS_HZ = 1000.0
@@ -184,7 +186,7 @@ def main(argv=None) -> int:
             print(f"{row['stage']:45s} {row['peak_rss_mb']:>7} MB {row['median_s']:>8} s {row['notes']}")
         if not args.keep:
             shutil.rmtree(work, ignore_errors=True)
-    write_section(rows, args.out)
+    write_performance_section(rows, args.out)
     return 0
 
 

@@ -1,4 +1,6 @@
-"""Throughput, time and peak memory of the paper-000 stages, against reading the same file.
+"""How fast and how lean are the paper-000 stages, against reading the same file?
+
+Throughput, time and peak memory of the paper-000 stages, against reading the same file.
 
 In ONE run this script
 
@@ -25,14 +27,14 @@ and written to ``results/benchmarks/performance.csv``.
 Other benchmarks append their own rows to the same CSV: every row has a ``section`` and a
 ``case``; a run replaces only the rows of the (section, case) pairs it measured, so
 ``--only stream`` keeps ``stages``, and any other section (e.g. ``batch`` or ``mcmc`` from
-another script, which can call :func:`write_section` with rows of :data:`COLUMNS`) stays.
+another script, which calls :func:`benchmarks.helpers.write_performance_section`) stays.
 
 Usage::
 
-    nice python workflow/benchmarks/bench_performance.py                 # 1 h log, full bank
-    nice python workflow/benchmarks/bench_performance.py --duration-s 60 --only stream
-    nice python workflow/benchmarks/bench_performance.py --long-bank export   # long run: 2 filters
-    python workflow/benchmarks/bench_performance.py --long-bank export --workers 1 2
+    PYTHONPATH=workflow nice python -m benchmarks.bench_performance                 # 1 h log, full bank
+    PYTHONPATH=workflow nice python -m benchmarks.bench_performance --duration-s 60 --only stream
+    PYTHONPATH=workflow nice python -m benchmarks.bench_performance --long-bank export   # long run: 2 filters
+    PYTHONPATH=workflow python -m benchmarks.bench_performance --long-bank export --workers 1 2
 """
 from __future__ import annotations
 
@@ -49,32 +51,10 @@ import time
 
 import pandas as pd
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from provenance import stamp  # noqa: E402
+from .helpers import RESULTS as OUT_DIR
+from .helpers import ROOT, TARGET_RSS_MB, child_env, module_argv, write_performance_section
 
-ROOT = pathlib.Path(__file__).resolve().parents[2]
-OUT_DIR = ROOT / "results" / "benchmarks"
-COLUMNS = ["section", "case", "stage", "n_samples", "n_joints", "reps", "median_s",
-           "samples_per_s", "ratio_to_read", "peak_rss_mb", "target", "met", "notes"]
-TARGET_RSS_MB = 1536.0
 TARGET_RATIO = 4.0
-
-
-def write_section(rows: list[dict], path: pathlib.Path) -> pd.DataFrame:
-    """Add ``rows`` to the CSV at ``path``, replacing the rows of the same (section, case);
-    rows of other sections (other scripts) and other cases are kept. New rows get this run's
-    date, machine and command (:func:`provenance.stamp`)."""
-    new = stamp(pd.DataFrame(rows, columns=COLUMNS))
-    if path.exists():
-        old = pd.read_csv(path)
-        replaced = set(zip(new["section"], new["case"]))
-        old = old[[pair not in replaced for pair in zip(old["section"], old["case"])]]
-        new = pd.concat([old, new], ignore_index=True) if len(old) else new
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".csv.tmp")
-    new.to_csv(tmp, index=False)
-    os.replace(tmp, path)
-    return new
 
 
 def _config() -> dict:
@@ -165,9 +145,9 @@ def _child(args: list[str]) -> tuple[dict, float]:
     """Run this script as a worker; returns its JSON answer and its wall time."""
     with tempfile.NamedTemporaryFile(suffix=".json", delete=False) as handle:
         answer = handle.name
-    cmd = [sys.executable, __file__, "--worker-out", answer] + args
+    cmd = module_argv("bench_performance") + ["--worker-out", answer] + args
     t0 = time.perf_counter()
-    subprocess.run(cmd, check=True)
+    subprocess.run(cmd, check=True, env=child_env())
     wall = time.perf_counter() - t0
     with open(answer, encoding="utf-8") as handle:
         out = json.load(handle)
@@ -321,7 +301,7 @@ def main(argv=None) -> int:
     load_note = f"load avg (1 min) {load_start[0]:.1f} at start, {load_end[0]:.1f} at end"
     for row in rows:
         row["notes"] = f"{row['notes']}; {load_note}" if row["notes"] else load_note
-    table = write_section(rows, args.out)
+    table = write_performance_section(rows, args.out)
     with pd.option_context("display.max_columns", None, "display.width", 250,
                            "display.max_colwidth", 60):
         print(table.drop(columns=["notes"]).to_string(index=False))

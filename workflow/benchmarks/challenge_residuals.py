@@ -1,4 +1,6 @@
-"""Challenge benchmark of the residual stage: undeclared effects in simulated two-channel logs.
+"""Does the residual stage name undeclared effects in simulated logs, and only those?
+
+Challenge benchmark of the residual stage: undeclared effects in simulated two-channel logs.
 
 Each log: a 32768-cpr truth channel (rounding) and a 4096-cpr measured channel with a random
 quantizer offset, 1 kHz, 10-15 s, motion a sine, a multi-sine or a random smooth path of peak
@@ -35,9 +37,9 @@ Wilson 90 % intervals.
 
 Usage::
 
-    python workflow/benchmarks/challenge_residuals.py --per-effect 40 --clean 100 --pairs 10 --hard 40 --hard-median 40
-    python workflow/benchmarks/challenge_residuals.py --per-effect 3 --clean 5 --pairs 1 --sweep-logs 2 --hard 3 --hard-median 3  # quick
-    python workflow/benchmarks/challenge_residuals.py --scaling   # wall time at 1e4, 1e5, 1e6 samples
+    PYTHONPATH=workflow python -m benchmarks.challenge_residuals --per-effect 40 --clean 100 --pairs 10 --hard 40 --hard-median 40
+    PYTHONPATH=workflow python -m benchmarks.challenge_residuals --per-effect 3 --clean 5 --pairs 1 --sweep-logs 2 --hard 3 --hard-median 3  # quick
+    PYTHONPATH=workflow python -m benchmarks.challenge_residuals --scaling   # wall time at 1e4, 1e5, 1e6 samples
 
 Writes ``<out>/challenge_residuals.csv`` (one row per log), ``<out>/challenge_residuals_summary.csv``
 and ``<out>/challenge_residuals.png``; prints the summary table.
@@ -46,10 +48,12 @@ from __future__ import annotations
 
 import os
 
-# Tiny BLAS calls inside the optimiser spin threads; on a shared machine this tripled the
-# wall time of a selection (measured 22 s -> 9 s on one log). One thread per worker process.
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+if __name__ == "__main__":
+    # Tiny BLAS calls inside the optimiser spin threads; on a shared machine this tripled the
+    # wall time of a selection (measured 22 s -> 9 s on one log). One thread per worker
+    # process, set before numpy loads BLAS, and only when run (an import changes nothing).
+    for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(_var, "1")
 
 import argparse  # noqa: E402
 import concurrent.futures  # noqa: E402
@@ -62,7 +66,6 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
-from provenance import stamp  # noqa: E402
 
 from enclab.residuals import diagnostics as dg  # noqa: E402
 from enclab.residuals.select import select_effects  # noqa: E402
@@ -70,9 +73,12 @@ from enclab.residuals import select as sel  # noqa: E402
 from enclab.residuals import effects as fx  # noqa: E402
 from enclab.residuals.simulate import random_map, random_motion, random_torque, simulate_log  # noqa: E402
 
+from .helpers import stamp, wilson  # noqa: E402
+
 STEP = 2 * np.pi / 4096
 TRUTH_STEP = STEP / 8
 LINE_PITCH = 16 * STEP
+WILSON_Z = 1.645  # the rates' Wilson intervals are 90 %
 BIC_THRESHOLD = 10.0
 SWEEP_SCALES = (1 / 243, 1 / 81, 1 / 27, 1 / 9)
 
@@ -241,15 +247,11 @@ def true_delta_bic(name, scale, seed) -> dict:
     """
     rng = np.random.default_rng(seed)
     log, eff, meta = _make_log(rng, [name], {name: scale})
-    ctx = sel._make_ctx(log["t"], log["truth"], *_counts(log), STEP, TRUTH_STEP, {}, 0.0, LINE_PITCH)
-    base = sel._Model([])
-    x, ll = sel._fit(base, ctx, sel._base_start(ctx))
-    cur = sel._Fitted(base, x, ll)
     e = next(c() for c in fx.EFFECTS if c.name == name)
-    new = sel._extend(cur, e, ctx)
-    k = new.model.n_params() - base.n_params()
-    n = ctx.fit_idx.size
-    return {"delta_bic": 2 * (new.ll - cur.ll) - k * math.log(n), "k": k, "n": n}
+    fitted = sel.added_effect_fit(log["t"], log["truth"], *_counts(log), STEP, TRUTH_STEP, e,
+                                  line_pitch=LINE_PITCH)
+    k, n = fitted["k"], fitted["n_fit"]
+    return {"delta_bic": 2 * (fitted["ll_effect"] - fitted["ll_base"]) - k * math.log(n), "k": k, "n": n}
 
 
 def _sweep_job(args):
@@ -434,17 +436,6 @@ def _found_true(res, eff, names, t_span: float) -> bool:
     return all(e.ci[p][0] <= true.get(p, 0.0) <= e.ci[p][1] for p in e.ci)
 
 
-def wilson(k, n, z=1.645):
-    """Wilson score interval of a proportion (90 % by default)."""
-    if n == 0:
-        return (float("nan"), float("nan"))
-    p = k / n
-    d = 1 + z * z / n
-    c = (p + z * z / (2 * n)) / d
-    h = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / d
-    return (c - h, c + h)
-
-
 def _map(fn, jobs, n_jobs):
     if n_jobs <= 1:
         return [fn(j) for j in jobs]
@@ -472,7 +463,7 @@ def thresholds(sweep: pd.DataFrame) -> dict:
 
 
 def _rate(k, n):
-    lo, hi = wilson(k, n)
+    lo, hi = wilson(k, n, WILSON_Z)
     return k / n if n else float("nan"), f"[{lo:.2f}, {hi:.2f}]"
 
 
@@ -590,28 +581,17 @@ def floor_calibration(n_logs: int, seed: int) -> pd.DataFrame:
             theta = (np.deg2rad(20.0) * np.sin(2 * np.pi * freq * t + rng.uniform(0, 2 * np.pi))
                      + rng.uniform(0, st) + rng.normal(0, 1e-6, t.size))
             truth = quantize(theta, ts) * ts
-            ctx = sel._make_ctx(t, truth, quantize(theta, st, 0.0), st, ts, {}, 0.0, None)
-            model = sel._Model([])
-            x, ll = sel._fit(model, ctx, sel._base_start(ctx))
-            fitted = sel._Fitted(model, x, ll)
-            lib = sel.residual_stats(fitted, ctx)
-            # the time-block standard error alone, from the same squared residuals
-            floor_var = lib["floor_std"] ** 2
-            mu, _ = model.forward(ctx, x)
-            r = st * (ctx.counts - np.floor(mu))
-            se_lib = (lib["floor_limit"] ** 2 - floor_var) / sel._T99_BLOCKS
-            half = 0.5 * ts / st
-            js = np.arange(-3, 4)  # the reach of residual_stats at this truth step
-            P = sel._floor_probs(mu, half, np.full(mu.size, 1e-9), js)
-            er2 = st**2 * ((js[:, None] ** 2) * P).sum(axis=0)
-            se_time = sel._block_se(r**2 - er2, np.array_split(np.arange(r.size), sel._FLOOR_BLOCKS))
-            var = r.var()
-            for label, se in (("time blocks", se_time), ("time blocks and angle bins", se_lib)):
-                lo, hi = max(floor_var - sel._Z90 * se, 0.0), floor_var + sel._Z90 * se
+            # the time-block standard error alone (3 truth cells each side: the reach of
+            # residual_stats at this truth step) beside the library's
+            terms = sel.floor_interval_terms(t, truth, quantize(theta, st, 0.0), st, ts, reach=3)
+            floor_var, var = terms["floor_var"], terms["residual_var"]
+            for label, se in (("time blocks", terms["se_time_blocks"]),
+                              ("time blocks and angle bins", terms["se_library"])):
+                lo, hi = max(floor_var - terms["z90"] * se, 0.0), floor_var + terms["z90"] * se
                 rows.append({"freq_hz": freq, "log": i, "interval_from": label,
                              "after_over_floor": math.sqrt(var / floor_var),
                              "outside_ci90": bool(var < lo or var > hi),
-                             "above_limit": bool(var > floor_var + sel._T99_BLOCKS * se)})
+                             "above_limit": bool(var > floor_var + terms["t99"] * se)})
     return pd.DataFrame(rows)
 
 
@@ -714,7 +694,7 @@ def main(argv=None):
     print("population thresholds (fraction of nominal magnitude):", {k: round(v, 4) for k, v in thr.items()})
 
     def rate_line(label, k, n):
-        lo, hi = wilson(k, n)
+        lo, hi = wilson(k, n, WILSON_Z)
         return f"{label}: {k}/{n} = {k / max(n, 1):.3f} (90% Wilson {lo:.3f}-{hi:.3f})"
 
     groups = {"single effects at datasheet size (>= 3x the population threshold)": ["single"],

@@ -1,20 +1,31 @@
-"""Run the bad-input corpus through the real workflow and print case / expected / got / pass.
+"""Does every case of the bad-input corpus end as expected through the real workflow?
+
+Run the bad-input corpus through the real workflow and print case / expected / got / pass.
 
 The cases are defined in tests/corpus/cases.py (the same ones tests/test_corpus.py asserts);
 this prints the Markdown table of the README's troubleshooting section. About two minutes on
 2 cores. Usage::
 
-    .venv/bin/python workflow/benchmarks/corpus_report.py [--keep DIR]
+    PYTHONPATH=workflow python -m benchmarks.corpus_report [--keep DIR]
 """
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import sys
 import tempfile
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tests" / "corpus"))
-from run import run_corpus  # noqa: E402
+from .helpers import ROOT
+
+
+def _run_corpus():
+    """``run_corpus`` of ``tests/corpus/run.py``: the corpus belongs to the tests, which are no
+    package, so it is loaded from its file when the report runs (never on import)."""
+    spec = importlib.util.spec_from_file_location("corpus_run", ROOT / "tests" / "corpus" / "run.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.run_corpus
 
 
 def _cell(text: str, width: int = 150) -> str:
@@ -28,7 +39,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     work = Path(args.keep or tempfile.mkdtemp(prefix="enclab_corpus_"))
     work.mkdir(parents=True, exist_ok=True)
-    outcomes, unchanged = run_corpus(work)
+    outcomes, unchanged = _run_corpus()(work)
     print("| case | input | expected | got | pass |")
     print("|---|---|---|---|---|")
     for o in outcomes:

@@ -1,4 +1,6 @@
-"""Proof by simulation of design mode: several budgets, each design on the same random trajectories.
+"""Do the designs that design mode chooses meet their budgets on simulated trajectories?
+
+Proof by simulation of design mode: several budgets, each design on the same random trajectories.
 
 The worked example's device and workspace (config.yaml ``design:``: Phantom Premium 1.5, +-30 deg
 per joint, Section IV motion of 3 deg at 5 +- 0.1 Hz about centres spread over the box, 1 kHz,
@@ -18,17 +20,14 @@ per budget item, the largest and 95th-percentile measured/budget ratios.
 
 Usage::
 
-    .venv/bin/python workflow/benchmarks/design_check.py            # 8 budgets x 200 trajectories of 15 s
-    .venv/bin/python workflow/benchmarks/design_check.py --quick    # 3 budgets x 40 trajectories of 5 s
+    PYTHONPATH=workflow python -m benchmarks.design_check            # 8 budgets x 200 trajectories of 15 s
+    PYTHONPATH=workflow python -m benchmarks.design_check --quick    # 3 budgets x 40 trajectories of 5 s
 """
 from __future__ import annotations
 
 import argparse
 import copy
-import datetime
 import json
-import platform
-import sys
 import time
 from pathlib import Path
 
@@ -39,6 +38,8 @@ import yaml
 from enclab.design import check as chk
 from enclab.design.problem import problem_from_config
 from enclab.design.search import search
+
+from .helpers import provenance
 
 BUDGETS = [
     ("velocity std 4 mm/s", "std", [{"order": 1, "std": 0.004}]),
@@ -65,8 +66,7 @@ def main(argv=None) -> None:
     budgets = BUDGETS
     if args.quick:
         budgets, args.trajectories, args.duration = [BUDGETS[i] for i in (0, 3, 5)], 40, 5.0
-    stamp = {"date": datetime.date.today().isoformat(), "machine": platform.node(),
-             "command": " ".join([Path(sys.argv[0]).name] + (argv if argv is not None else sys.argv[1:]))}
+    stamp = provenance(argv)
     rows = []
     for b, (label, kind, budget) in enumerate(budgets):
         designs = {}

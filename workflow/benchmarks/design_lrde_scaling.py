@@ -1,4 +1,6 @@
-"""How the low-resolution encoder's stroke and bias precision scale with cycles and sample rate.
+"""How do the low-resolution encoder's stroke and bias precision scale with cycles and rate?
+
+How the low-resolution encoder's stroke and bias precision scale with cycles and sample rate.
 
 Paper 002's setting as in bench_lrde.py: step 0.09 deg, offset a ~ U(0, step), stroke
 A12 ~ U(3, 5) steps, bias deviation E_b inside Proposition 1's band, f ~ 20 Hz x U(0.9, 1.1), white
@@ -16,25 +18,24 @@ to ``results/benchmarks/design_lrde_scaling.csv`` and the laws to
 
 Usage::
 
-    .venv/bin/python workflow/benchmarks/design_lrde_scaling.py --draws 24 --jobs 2
-    .venv/bin/python workflow/benchmarks/design_lrde_scaling.py --quick
+    PYTHONPATH=workflow python -m benchmarks.design_lrde_scaling --draws 24 --jobs 2
+    PYTHONPATH=workflow python -m benchmarks.design_lrde_scaling --quick
     # check a designed setting (one row, no law): 78 cycles at 100 samples per period
-    .venv/bin/python workflow/benchmarks/design_lrde_scaling.py --cycles 78 --spp 100 --draws 24
+    PYTHONPATH=workflow python -m benchmarks.design_lrde_scaling --cycles 78 --spp 100 --draws 24
 """
 from __future__ import annotations
 
 import argparse
 import concurrent.futures
-import datetime
-import platform
-import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from enclab.design.lrde import fit_law
-from enclab.lrde import fit, model, simulate
+from enclab.lrde import fit, simulate
+
+from .helpers import open_loop_draw, provenance
 
 STEP = simulate.ROS_DRILL_STEP
 F_NOMINAL = 20.0
@@ -72,15 +73,7 @@ def oracle_median(t, counts, p, rng):
 
 def one_draw(cycles: int, spp: float, draw: int, seed_seq) -> dict:
     sim_seed, fit_seed, grid_seed = seed_seq.spawn(3)
-    rng = np.random.default_rng(sim_seed)
-    f_hz = F_NOMINAL * rng.uniform(0.9, 1.1)
-    a_frac = rng.uniform(0, 1)
-    A12 = rng.uniform(3.0, 5.0) * STEP
-    half_eps = 0.5 * float(model.epsilon(A12, STEP))
-    E_b = rng.uniform(-half_eps, half_eps)
-    bias = E_b + 0.5 * STEP - a_frac * STEP
-    df, p = simulate.open_loop_log(rng, A12=A12, bias=bias, f_hz=f_hz, fs_hz=spp * F_NOMINAL,
-                                   n_cycles=cycles + 1, offset_frac=a_frac, noise_std=NOISE * STEP)
+    df, p = open_loop_draw(np.random.default_rng(sim_seed), cycles, spp * F_NOMINAL, F_NOMINAL, NOISE)
     t, counts = df["t"].to_numpy(), df["counts"].to_numpy()
     row = {"cycles": cycles, "samples_per_period": spp, "draw": draw, "A12_true": p["A12"] / STEP,
            "E_b_true": p["E_b"] / STEP, "n_samples": int(t.size)}
@@ -134,8 +127,7 @@ def main(argv=None) -> None:
             continue
         laws.append({"estimator": est, "quantity": q, **law.to_dict(), **stats})
     laws = pd.DataFrame(laws)
-    stamp = {"date": datetime.date.today().isoformat(), "machine": platform.node(),
-             "command": " ".join([Path(sys.argv[0]).name] + (argv or sys.argv[1:]))}
+    stamp = provenance(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     for frame, name in ((summary, "design_lrde_scaling.csv"), (laws, "design_lrde_laws.csv")):

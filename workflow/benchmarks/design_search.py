@@ -1,4 +1,6 @@
-"""Cost of the design search: 3 joints, a 7^3 grid of motion centres, the whole default filter
+"""How long does the design search take on 3 joints, the whole bank and 8 resolutions each?
+
+Cost of the design search: 3 joints, a 7^3 grid of motion centres, the whole default filter
 bank (both derivative orders budgeted, so every filter of ``derivatives.bank`` in every
 architecture is a candidate), 8 candidate resolutions per joint (8^3 combinations).
 
@@ -10,16 +12,13 @@ The target is 60 s on 2 cores.
 
 Usage::
 
-    .venv/bin/python workflow/benchmarks/design_search.py [--repeats 3] [--quick]
+    PYTHONPATH=workflow python -m benchmarks.design_search [--repeats 3] [--quick]
 """
 from __future__ import annotations
 
 import argparse
 import copy
-import datetime
 import os
-import platform
-import sys
 import time
 from pathlib import Path
 
@@ -30,6 +29,7 @@ import yaml
 from enclab.design.problem import problem_from_config
 from enclab.design.search import search
 
+from .helpers import provenance
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -54,9 +54,7 @@ def main(argv=None) -> None:
         result = search(problem)
         walls.append(time.perf_counter() - wall0)
         cpus.append(time.process_time() - cpu0)
-    row = {"date": datetime.date.today().isoformat(), "machine": platform.node(),
-           "command": " ".join([Path(sys.argv[0]).name] + (argv if argv is not None else sys.argv[1:])),
-           "joints": problem.n_joints, "grid_points": int(problem.centres().shape[0]),
+    row = {**provenance(argv), "joints": problem.n_joints, "grid_points": int(problem.centres().shape[0]),
            "bound_cells": int(problem.bound_grid()[0].shape[0]),
            "resolutions": int(problem.steps.size), "combinations": int(result.combos.shape[0]),
            "estimators": len(result.candidates), "designs_evaluated": int(result.n_designs),

@@ -1,5 +1,6 @@
-"""How close is the exact non-white model, filter by filter, once run-to-run scatter is averaged
-away? Many trajectories of one joint of paper 000's protocol, every filter of the configured bank.
+"""How close is the exact non-white model, filter by filter, once run-to-run scatter is averaged?
+
+Many trajectories of one joint of paper 000's protocol, every filter of the configured bank.
 
 Protocol: 1 kHz, 15 s, 3 deg at 5 +- 0.1 Hz, truth at 0.125 mrad re-quantized 8x to 1 mrad
 (``--continuous``: a continuous truth quantized at 1 mrad). One run's derivative-noise std
@@ -16,16 +17,13 @@ former, and appends them to ``results/benchmarks/exact_model_precision.csv`` (``
 
 Usage::
 
-    .venv/bin/python workflow/benchmarks/exact_model_precision.py --runs 40 [--jobs 2]
-    .venv/bin/python workflow/benchmarks/exact_model_precision.py --quick
+    PYTHONPATH=workflow python -m benchmarks.exact_model_precision --runs 40 [--jobs 2]
+    PYTHONPATH=workflow python -m benchmarks.exact_model_precision --quick
 """
 from __future__ import annotations
 
 import argparse
 import concurrent.futures
-import datetime
-import platform
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +32,8 @@ import scipy.stats
 import yaml
 from enclab.core import quantize
 from enclab.propagation import analysis, filters, theory
+
+from .helpers import provenance
 
 FS = 1000.0
 TRUTH_STEP = 1.25e-4
@@ -96,9 +96,7 @@ def main(argv=None) -> None:
         "exact_mean": exact.mean(axis=0),
         "exact_ci95": q * exact.std(axis=0, ddof=1) / np.sqrt(args.runs),
         "pqn_mean": pqn.mean(axis=0)})
-    stamp = {"date": datetime.date.today().isoformat(), "machine": platform.node(),
-             "command": " ".join([Path(sys.argv[0]).name] + (argv if argv is not None else sys.argv[1:])),
-             "truth": "continuous" if args.continuous else "0.125 mrad re-quantized 8x",
+    stamp = {**provenance(argv), "truth": "continuous" if args.continuous else "0.125 mrad re-quantized 8x",
              "runs": args.runs, "centres": args.centres}
     table = pd.concat([pd.DataFrame([stamp] * len(summary)), summary], axis=1)
     out = Path(args.out)

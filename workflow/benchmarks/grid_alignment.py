@@ -1,5 +1,6 @@
-"""How the sub-step centre of a run moves its measured/exact ratio, and how a repeat group should
-place its runs: grid-aligned, independent uniform, or stratified over one step.
+"""How does a run's sub-step centre move its measured/exact ratio, and where should repeats go?
+
+A repeat group may place its runs grid-aligned, independent uniform, or stratified over one step.
 
 A single joint follows paper 000's protocol (1 kHz, 15 s, 3 deg sinusoid at a frequency drawn in
 5 +- 0.1 Hz, truth at 0.125 mrad) and is re-quantized 8x to a 1 mrad step. With a constant
@@ -22,21 +23,20 @@ Rows are appended to ``results/benchmarks/grid_alignment.csv`` (``date``, ``mach
 
 Usage::
 
-    .venv/bin/python workflow/benchmarks/grid_alignment.py            # ~4 CPU-min
-    .venv/bin/python workflow/benchmarks/grid_alignment.py --quick
+    PYTHONPATH=workflow python -m benchmarks.grid_alignment            # ~4 CPU-min
+    PYTHONPATH=workflow python -m benchmarks.grid_alignment --quick
 """
 from __future__ import annotations
 
 import argparse
-import datetime
-import platform
-import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 from enclab.core import quantize
 from enclab.propagation import filters, theory
+
+from .helpers import provenance
 
 FS = 1000.0
 TRUTH_STEP = 1.25e-4
@@ -71,7 +71,7 @@ class RunRatios:
         out = []
         for filt, r_h, skip in zip(self.bank, self.r_h, self.settle):
             measured = np.var(filters.apply(filt, err, FS)[skip:], ddof=1)
-            out.append(measured / theory._two_sided_sum(r_h, c[: r_h.size]))
+            out.append(measured / theory.filtered_variance(r_h, c[: r_h.size]))
         return np.array(out)
 
 
@@ -133,9 +133,8 @@ def main(argv=None) -> None:
 
     table = pd.DataFrame(rows)
     table.insert(0, "runs_per_pool", args.runs)
-    table.insert(0, "command", " ".join([Path(sys.argv[0]).name] + (argv or sys.argv[1:])))
-    table.insert(0, "machine", platform.node())
-    table.insert(0, "date", datetime.date.today().isoformat())
+    for name, value in reversed(provenance(argv).items()):
+        table.insert(0, name, value)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     path = out / "grid_alignment.csv"

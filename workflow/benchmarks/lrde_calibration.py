@@ -1,4 +1,6 @@
-"""Calibration of the LRDE posterior itself: the true model, no comparison, no pooling.
+"""Is the LRDE posterior itself calibrated when the true model is fitted?
+
+Calibration of the LRDE posterior itself: the true model, no comparison, no pooling.
 
 The effects benchmark (``bench_lrde_effects.py``) measures the stage: coverage there mixes
 the posterior with the model the comparison chose and with pooling. This script separates
@@ -15,8 +17,8 @@ stage coverage below the joint one at the model choice or pooling.
 
 Usage::
 
-    python workflow/benchmarks/lrde_calibration.py --case hysteresis --cycles 100 --draws 40
-    python workflow/benchmarks/lrde_calibration.py --case clean --cycles 100 --draws 40 \\
+    PYTHONPATH=workflow python -m benchmarks.lrde_calibration --case hysteresis --cycles 100 --draws 40
+    PYTHONPATH=workflow python -m benchmarks.lrde_calibration --case clean --cycles 100 --draws 40 \\
         --conditional-only
 
 Writes ``<out>/lrde_calibration_draws.csv`` and ``<out>/lrde_calibration.csv`` (appends).
@@ -25,18 +27,17 @@ from __future__ import annotations
 
 import argparse
 import pathlib
-import sys
 import time
 
 import numpy as np
 import pandas as pd
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from bench_lrde_effects import STEP, simulate_case, wilson  # noqa: E402
-from provenance import ROOT, stamp  # noqa: E402
 
-from enclab.core.allocator import keep_freed_memory  # noqa: E402
-from enclab.lrde import effects, fit  # noqa: E402
+from enclab.core.allocator import keep_freed_memory
+from enclab.lrde import effects, fit
+
+from .bench_lrde_effects import STEP, simulate_case
+from .helpers import ROOT, stamp, wilson
 
 CASES = ("clean", "noise", "hysteresis")
 

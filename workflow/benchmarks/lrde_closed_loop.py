@@ -1,4 +1,6 @@
-"""Benchmark of the LRDE stage on closed-loop logs (paper 002's own setting).
+"""How does the LRDE stage do on closed-loop logs (paper 002's own setting)?
+
+Benchmark of the LRDE stage on closed-loop logs (paper 002's own setting).
 
 Each draw is a PID servo tracking a 20 Hz sinusoid with the Ros-Drill encoder (0.09 deg) in
 the loop (:func:`enclab.lrde.simulate.closed_loop_pid_log`, paper 002 Fig. 5), over a grid of
@@ -37,7 +39,7 @@ step): there an untrusted flag is false.
 
 Usage (shards run side by side or one after another)::
 
-    python workflow/benchmarks/lrde_closed_loop.py --draws 4 --cycles 20 --shard 0/2
+    PYTHONPATH=workflow python -m benchmarks.lrde_closed_loop --draws 4 --cycles 20 --shard 0/2
 
 Writes ``<out>/lrde_closed_loop_draws.csv`` and ``<out>/lrde_closed_loop.csv`` (per cell).
 """
@@ -52,10 +54,10 @@ import numpy as np
 import pandas as pd
 import yaml
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from provenance import ROOT, stamp  # noqa: E402
 
-from enclab.lrde import pipeline, simulate  # noqa: E402
+from enclab.lrde import pipeline, simulate
+
+from .helpers import ROOT, reference_loop_seconds, stamp
 
 STEP = simulate.ROS_DRILL_STEP
 FINE = STEP / 100
@@ -123,9 +125,7 @@ def one_draw(gains, effect, n_cycles, seed, settings, threads, command=True):
     rng = np.random.default_rng(seed)
     df, meta, truth = simulate_log(rng, gains, effect, n_cycles, command)
     # The machine's speed beside the stage: a 5M-iteration Python loop, timed just before.
-    ref = time.perf_counter()
-    [0 for _ in range(5_000_000)]
-    ref_s = time.perf_counter() - ref
+    ref_s = reference_loop_seconds(clock=time.perf_counter)
     started = time.perf_counter()
     block, _, _, _ = pipeline.analyse_lrde_log(df, meta, seed, dict(settings), threads=threads)
     wall = time.perf_counter() - started

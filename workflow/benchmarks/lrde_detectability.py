@@ -1,8 +1,10 @@
-"""Which benchmark logs carry evidence of their effect at all: the oracle's model comparison.
+"""Which benchmark logs carry evidence of their effect at all?
+
+The oracle's model comparison.
 
 For every draw of ``bench_lrde_effects.py`` with a sized effect (``hysteresis``, ``drift``,
 ``harmonic``), the log is simulated again from its seed and the score the comparison uses (the
-full-log likelihood with the held-out score's time blur, :func:`enclab.lrde.compare._blurred_log_lik`)
+full-log likelihood with the held-out score's time blur, :func:`enclab.lrde.compare.blurred_log_likelihood`)
 is taken at the **true parameters** of the right model and at the sinusoid's point fit. The
 oracle's BIC gain ``2 (log L_truth - log L_sine) - n_extra ln N`` is what a comparison that
 knew the answer would see: where it is negative, the readings favour the sinusoid even over the
@@ -18,10 +20,10 @@ among the draws with and without that evidence.
 
 Usage (from the repository root)::
 
-    .venv/bin/python workflow/benchmarks/lrde_detectability.py \\
+    PYTHONPATH=workflow python -m benchmarks.lrde_detectability \\
         --draws results/benchmarks/lrde_effects_draws.csv --cycles 20
     # after a change that leaves the likelihood alone: keep the gains already computed
-    .venv/bin/python workflow/benchmarks/lrde_detectability.py --cycles 20 \\
+    PYTHONPATH=workflow python -m benchmarks.lrde_detectability --cycles 20 \\
         --reuse results/benchmarks/lrde_detectability_draws.csv --out results/benchmarks
 
 Writes ``<out>/lrde_detectability_draws.csv`` and ``<out>/lrde_detectability.csv``.
@@ -36,13 +38,13 @@ import time
 import numpy as np
 import pandas as pd
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from bench_lrde_effects import STEP, simulate_case, threshold  # noqa: E402
-from provenance import ROOT, stamp  # noqa: E402
 
-from enclab.core import atomic  # noqa: E402
-from enclab.lrde import compare, fit  # noqa: E402
-from enclab.lrde import effects as lrde_effects  # noqa: E402
+from enclab.core import atomic
+from enclab.lrde import compare, fit
+from enclab.lrde import effects as lrde_effects
+
+from .bench_lrde_effects import STEP, simulate_case, threshold
+from .helpers import ROOT, stamp
 
 TERMS = {"hysteresis": ((), ("hysteresis",)), "drift": ((), ("drift",)), "harmonic": ((3,), ())}
 
@@ -82,9 +84,9 @@ def one(case: str, cycles: int, seed: int) -> dict:
                         init=sine["init"])
     n_extra = 2 * len(harmonics) + len(effects)
     penalty = n_extra * np.log(t.size)
-    ll_sine = compare._blurred_log_lik(sine, t, counts)
-    ll_true = compare._blurred_log_lik(oracle, t, counts)
-    ll_refit = compare._blurred_log_lik(refit, t, counts)
+    ll_sine = compare.blurred_log_likelihood(sine, t, counts)
+    ll_true = compare.blurred_log_likelihood(oracle, t, counts)
+    ll_refit = compare.blurred_log_likelihood(refit, t, counts)
     return {"oracle_gain": 2.0 * (ll_true - ll_sine) - penalty,
             "refit_gain": 2.0 * (ll_refit - ll_sine) - penalty}
 

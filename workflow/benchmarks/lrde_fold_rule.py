@@ -15,9 +15,9 @@ fold, with each fold's gain and standard error.
 
 Usage::
 
-    python workflow/benchmarks/lrde_fold_rule.py --cases harmonic hysteresis clean --draws 200
-    python workflow/benchmarks/lrde_fold_rule.py --cases clean --draws 200 --shard 1/2
-    python workflow/benchmarks/lrde_fold_rule.py --from-draws a/lrde_fold_rule_draws.csv \\
+    PYTHONPATH=workflow python -m benchmarks.lrde_fold_rule --cases harmonic hysteresis clean --draws 200
+    PYTHONPATH=workflow python -m benchmarks.lrde_fold_rule --cases clean --draws 200 --shard 1/2
+    PYTHONPATH=workflow python -m benchmarks.lrde_fold_rule --from-draws a/lrde_fold_rule_draws.csv \\
         b/lrde_fold_rule_draws.csv
 
 Writes ``<out>/lrde_fold_rule_draws.csv`` and ``<out>/lrde_fold_rule.csv`` (per case, cycle
@@ -28,18 +28,17 @@ from __future__ import annotations
 
 import argparse
 import pathlib
-import sys
 import time
 
 import numpy as np
 import pandas as pd
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from provenance import stamp  # noqa: E402
 
-import bench_lrde_effects as bench  # noqa: E402
-from enclab.core.allocator import keep_freed_memory  # noqa: E402
-from enclab.lrde import compare  # noqa: E402
+from enclab.core.allocator import keep_freed_memory
+from enclab.lrde import compare
+
+from . import bench_lrde_effects as bench
+from .helpers import stamp, wilson
 
 STEP = bench.STEP
 FOLD_SE = (2.0, 0.0)
@@ -80,7 +79,7 @@ def summarise(draws: pd.DataFrame, fold_ses) -> pd.DataFrame:
     for (cycles, case), d in draws.groupby(["cycles", "case"], sort=True):
         for value in fold_ses:
             k = int(d[f"named_{value:g}"].sum())
-            lo, hi = bench.wilson(k, len(d))
+            lo, hi = wilson(k, len(d))
             differs = d[d[f"chosen_{value:g}"] != d[f"chosen_{fold_ses[0]:g}"]]
             rows.append({"cycles": cycles, "case": case, "fold_se": value, "n": len(d),
                          "named_rate": k / len(d), "named_ci_lo": lo, "named_ci_hi": hi,

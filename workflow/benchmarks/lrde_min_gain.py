@@ -17,9 +17,9 @@ is pooled, and whether its 90 % intervals of ``A12`` (the stroke) and ``E_b`` ho
 
 Usage::
 
-    python workflow/benchmarks/lrde_min_gain.py --cases harmonic clean --draws 100
-    python workflow/benchmarks/lrde_min_gain.py --cases harmonic --draws 100 --shard 1/2
-    python workflow/benchmarks/lrde_min_gain.py --from-draws a/lrde_min_gain_draws.csv \\
+    PYTHONPATH=workflow python -m benchmarks.lrde_min_gain --cases harmonic clean --draws 100
+    PYTHONPATH=workflow python -m benchmarks.lrde_min_gain --cases harmonic --draws 100 --shard 1/2
+    PYTHONPATH=workflow python -m benchmarks.lrde_min_gain --from-draws a/lrde_min_gain_draws.csv \\
         b/lrde_min_gain_draws.csv
 
 Writes ``<out>/lrde_min_gain_draws.csv`` and ``<out>/lrde_min_gain.csv`` (per case, cycle
@@ -30,18 +30,17 @@ from __future__ import annotations
 
 import argparse
 import pathlib
-import sys
 import time
 
 import numpy as np
 import pandas as pd
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from provenance import stamp  # noqa: E402
 
-import bench_lrde_effects as bench  # noqa: E402
-from enclab.core.allocator import keep_freed_memory  # noqa: E402
-from enclab.lrde import compare, fit  # noqa: E402
+from enclab.core.allocator import keep_freed_memory
+from enclab.lrde import compare, fit
+
+from . import bench_lrde_effects as bench
+from .helpers import stamp, wilson
 
 STEP = bench.STEP
 GAINS = (1.0, 0.5, 0.25)
@@ -76,7 +75,7 @@ def one_draw(case, n_cycles, seed, sampler, gains):
            "not_ruled_out": "|".join(f"{label}:{gain[label]:.2f}"
                                      for label in comp["not_ruled_out"]),
            "trusted": comp["check"]["trusted"]}
-    lo, hi = bench._interval(pick, "A12")
+    lo, hi = bench.interval(pick, "A12")
     own_width = hi - lo
     for g in gains:
         labels = comp["indistinguishable"] + [label for label in comp["not_ruled_out"]
@@ -84,7 +83,7 @@ def one_draw(case, n_cycles, seed, sampler, gains):
         after = fit.pool_fits([pick] + [fits[label] for label in labels]) if labels else pick
         row[f"pooled_{g:g}"] = bool(labels)
         for name in ("A12", "E_b"):
-            lo, hi = bench._interval(after, name)
+            lo, hi = bench.interval(after, name)
             row[f"{name}_cover_{g:g}"] = bool(lo <= row[f"{name}_true"] <= hi)
             if name == "A12":
                 row[f"A12_width_ratio_{g:g}"] = (hi - lo) / own_width
@@ -100,7 +99,7 @@ def summarise(draws: pd.DataFrame, gains) -> pd.DataFrame:
                    "pooled_rate": d[f"pooled_{g:g}"].mean()}
             for name in ("A12", "E_b"):
                 k = int(d[f"{name}_cover_{g:g}"].sum())
-                lo, hi = bench.wilson(k, len(d))
+                lo, hi = wilson(k, len(d))
                 row |= {f"{name}_cover": k / len(d), f"{name}_cover_ci_lo": lo,
                         f"{name}_cover_ci_hi": hi}
             row["A12_width_ratio_median"] = float(d[f"A12_width_ratio_{g:g}"].median())

@@ -1,4 +1,4 @@
-"""Effects outside the LRDE catalogue: are they flagged and placed, rather than misnamed?
+"""Are effects outside the LRDE catalogue flagged and placed, rather than misnamed?
 
 The effect comparison (:func:`enclab.lrde.compare.compare_effect_models`) can only name the
 terms it knows. An effect it does not know is absorbed by the nearest candidates (a misplaced
@@ -34,8 +34,8 @@ the margin), the share misnamed and unflagged, and the covariate the trace names
 
 Usage::
 
-    python workflow/benchmarks/lrde_misfit_trace.py --draws 12 --cycles 20
-    python workflow/benchmarks/lrde_misfit_trace.py --draws 4 --cycles 20 --cases edge_error clean
+    PYTHONPATH=workflow python -m benchmarks.lrde_misfit_trace --draws 12 --cycles 20
+    PYTHONPATH=workflow python -m benchmarks.lrde_misfit_trace --draws 4 --cycles 20 --cases edge_error clean
 
 Writes ``<out>/lrde_misfit_trace_draws.csv`` and ``<out>/lrde_misfit_trace.csv``. With
 ``--from-draws CSV`` it summarises an earlier run's draws instead (stamped with that run's
@@ -45,17 +45,16 @@ from __future__ import annotations
 
 import argparse
 import pathlib
-import sys
 import time
 
 import numpy as np
 import pandas as pd
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-import bench_lrde_effects as effects_bench  # noqa: E402
-from provenance import ROOT, stamp  # noqa: E402
 
-from enclab.lrde import compare  # noqa: E402
+from enclab.lrde import compare
+
+from . import bench_lrde_effects as effects_bench
+from .helpers import ROOT, log_uniform, stamp
 
 STEP = effects_bench.STEP
 OUTSIDE = ("edge_error", "harmonic5", "amplitude_drift", "bias_drift", "two_jumps")
@@ -85,19 +84,19 @@ def simulate_outside(rng, case, n_cycles, fs_hz=2000.0, f_nominal=20.0, noise_fr
     gain, bias, harmonic, size = 0.0, 0.0, 0.0, 0.0
     sign = rng.choice([-1.0, 1.0])
     if case == "harmonic5":
-        size = effects_bench._log_uniform(rng, 0.03, 0.2)
+        size = log_uniform(rng, 0.03, 0.2)
         harmonic = size * STEP * np.sin(5 * phi + rng.uniform(-np.pi, np.pi))
     elif case == "amplitude_drift":
-        size = effects_bench._log_uniform(rng, 0.05, 0.25)
+        size = log_uniform(rng, 0.05, 0.25)
         gain = sign * size
     elif case == "bias_drift":
-        size = effects_bench._log_uniform(rng, 0.1, 0.5)
+        size = log_uniform(rng, 0.1, 0.5)
         bias = sign * size * STEP
     theta = 0.5 * A12 * (1.0 + gain * (u - 0.5)) * np.sin(phi) + harmonic + a_eq + bias * u
     x = theta / STEP + rng.normal(0.0, noise_frac, t.size)
     counts = np.floor(x).astype(np.int64)
     if case == "edge_error":
-        size = effects_bench._log_uniform(rng, 0.05, 0.4)
+        size = log_uniform(rng, 0.05, 0.4)
         edges = np.arange(int(np.floor(x.min())) + 1, int(np.floor(x.max())) + 1)
         edge = int(rng.choice(edges))
         shift = sign * size

@@ -1,4 +1,6 @@
-"""How well could *any* estimator do? An oracle posterior for the bench_lrde.py draws.
+"""How well could *any* estimator do on the bench_lrde.py draws?
+
+An oracle posterior for the bench_lrde.py draws.
 
 The oracle knows everything but the stroke and the bias: the frequency, the phase and the
 jitter are fixed at their true values, and the posterior of ``(A12, a_eq)`` under flat priors
@@ -14,7 +16,7 @@ joined on (cycles, draw).
 
 Usage::
 
-    python workflow/benchmarks/lrde_oracle_bound.py --draws 200 --cycles 20 --jobs 2
+    PYTHONPATH=workflow python -m benchmarks.lrde_oracle_bound --draws 200 --cycles 20 --jobs 2
 
 Writes ``<out>/lrde_oracle.csv`` (per draw: oracle, eq. 4 averaged and sampling phase gap) and
 prints RMSEs for all draws and split into commensurate / spread sampling.
@@ -28,8 +30,10 @@ import pathlib
 import numpy as np
 import pandas as pd
 
-from bench_lrde import COMMENSURATE_GAP, STEP, sampling_phase_gap, simulate_draw
 from enclab.lrde import dwell, fit
+
+from .bench_lrde import COMMENSURATE_GAP, STEP, sampling_phase_gap
+from .helpers import open_loop_draw
 
 
 def grid_posterior(t, counts, A_grid, aeq_grid, f_hz, phase, sigma):
@@ -42,7 +46,7 @@ def grid_posterior(t, counts, A_grid, aeq_grid, f_hz, phase, sigma):
     for i in range(0, len(rows), 256):
         a, e = rows[i:i + 256, 0:1], rows[i:i + 256, 1:2]
         z = e + 0.5 * a * sine
-        logp[i:i + 256] = fit._log_interval_prob((counts - z) / s, (counts + 1 - z) / s).sum(1)
+        logp[i:i + 256] = fit.log_interval_probability((counts - z) / s, (counts + 1 - z) / s).sum(1)
     logp = logp.reshape(A.shape)
     post = np.exp(logp - logp.max())
     return post / post.sum()
@@ -55,7 +59,7 @@ def weighted_median(values, weights):
 
 
 def one_draw(rng, n_cycles, fs_hz, f_nominal, noise_frac):
-    df, p = simulate_draw(rng, n_cycles, fs_hz, f_nominal, noise_frac)
+    df, p = open_loop_draw(rng, n_cycles, fs_hz, f_nominal, noise_frac)
     A12, f_hz = p["A12"], p["f_hz"]
     t, c = df["t"].to_numpy(), df["counts"].to_numpy()
     A_true, aeq_true = A12 / STEP, p["a_eq"] / STEP

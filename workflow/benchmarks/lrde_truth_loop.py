@@ -1,4 +1,6 @@
-"""Benchmark of the loop between the residual stage and the LRDE fit on truth-channel logs.
+"""Do the residual stage's findings on a truth channel carry into the LRDE fit?
+
+Benchmark of the loop between the residual stage and the LRDE fit on truth-channel logs.
 
 Each draw is a low-resolution log as in ``bench_lrde_effects.py`` (step 0.09 deg, ``A12 ~
 U(3, 5)`` steps, ``E_b`` in Proposition 1's band, f ~ 20 Hz x U(0.9, 1.1) at 2 kHz, position
@@ -23,7 +25,7 @@ without it.
 
 Usage::
 
-    python workflow/benchmarks/lrde_truth_loop.py --draws 40 --clean-draws 20
+    PYTHONPATH=workflow python -m benchmarks.lrde_truth_loop --draws 40 --clean-draws 20
 
 Writes ``<out>/lrde_truth_loop_draws.csv`` and ``<out>/lrde_truth_loop.csv`` (summary).
 """
@@ -31,19 +33,18 @@ from __future__ import annotations
 
 import argparse
 import pathlib
-import sys
 import time
 
 import numpy as np
 import pandas as pd
 import yaml
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from provenance import ROOT, stamp  # noqa: E402
 
-from enclab.lrde import effects, model, pipeline, simulate  # noqa: E402
-from enclab.reference_effects import lrde_reference  # noqa: E402
-from enclab.residuals.pipeline import analyse_channel  # noqa: E402
+from enclab.lrde import effects, model, pipeline, simulate
+from enclab.reference_effects import lrde_reference
+from enclab.residuals.pipeline import analyse_channel
+
+from .helpers import ROOT, stamp
 
 STEP = simulate.ROS_DRILL_STEP
 FINE = STEP / 100

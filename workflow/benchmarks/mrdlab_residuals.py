@@ -1,4 +1,6 @@
-"""MRDLab da Vinci tool rig: what makes the output encoders differ from the motor encoder?
+"""What makes the MRDLab da Vinci tool's output encoders differ from its motor encoder?
+
+MRDLab da Vinci tool rig: output encoders against the motor encoder.
 
 The 8192-cpr CUI output encoder (and the 4000-cpr front-end encoder) against the back-end motor
 encoder divided by the 35:1 gear ratio (the truth; data/manifest.real.yaml, entry
@@ -23,10 +25,10 @@ run on the same logs too (with the back-end torque as ``aux["torque"]``).
 
 Usage (from the repository root; needs ../shared/data/real)::
 
-    .venv/bin/python workflow/benchmarks/mrdlab_residuals.py                 # 40.TXT only
-    .venv/bin/python workflow/benchmarks/mrdlab_residuals.py --all           # the 20 runs
-    .venv/bin/python workflow/benchmarks/mrdlab_residuals.py --all --out results/analyses
-    .venv/bin/python workflow/benchmarks/mrdlab_residuals.py --library-candidates scale_mismatch hysteresis backlash compliance
+    PYTHONPATH=workflow python -m benchmarks.mrdlab_residuals                 # 40.TXT only
+    PYTHONPATH=workflow python -m benchmarks.mrdlab_residuals --all           # the 20 runs
+    PYTHONPATH=workflow python -m benchmarks.mrdlab_residuals --all --out results/analyses
+    PYTHONPATH=workflow python -m benchmarks.mrdlab_residuals --library-candidates scale_mismatch hysteresis backlash compliance
 
 Writes ``mrdlab_models.csv`` (one row per run, channel and model) and ``mrdlab_residuals.md``.
 """
@@ -49,7 +51,8 @@ from enclab.residuals.effects import play_operator
 from enclab.residuals.pipeline import channel_values
 from scipy import optimize
 
-ROOT = Path(__file__).resolve().parents[2]
+from .helpers import ROOT
+
 TORQUE_STEP = 3.9811e-5  # N m per Futek count (PROVENANCE.md)
 MODELS = {
     "exact": (),

@@ -1,4 +1,6 @@
-"""MRDLab da Vinci tool as a rig: the CUI output encoder of all 20 runs fitted together.
+"""How well do rig models of the MRDLab tool's CUI output encoder predict held-out runs?
+
+MRDLab da Vinci tool as a rig: the CUI output encoder of all 20 runs fitted together.
 
 The 20 runs of ``Tool_4_Maryland_L_2`` (5 frequencies x 4 reaction-torque levels, the rig
 ``mrdlab_tool4`` of ``data/manifest.real.yaml``) against the back-end motor encoder through the
@@ -52,18 +54,20 @@ CPU seconds of a 5M-iteration Python loop measured in the same process.
 
 Usage (from the repository root; needs ../shared/data/real)::
 
-    .venv/bin/python workflow/benchmarks/mrdlab_rig.py
-    .venv/bin/python workflow/benchmarks/mrdlab_rig.py --models rig --loro --suffix _loro
-    .venv/bin/python workflow/benchmarks/mrdlab_rig.py --rules
+    PYTHONPATH=workflow python -m benchmarks.mrdlab_rig
+    PYTHONPATH=workflow python -m benchmarks.mrdlab_rig --models rig --loro --suffix _loro
+    PYTHONPATH=workflow python -m benchmarks.mrdlab_rig --rules
 """
 from __future__ import annotations
 
 import os
 
-# One BLAS thread, as the rig rule runs (Snakemake sets it to the rule's threads): on a shared
-# machine, idle BLAS threads spinning on the small products of a rig fit cost more CPU than the fit.
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+if __name__ == "__main__":
+    # One BLAS thread, as the rig rule runs (Snakemake sets it to the rule's threads): on a
+    # shared machine, idle BLAS threads spinning on the small products of a rig fit cost more
+    # CPU than the fit. Set before numpy loads BLAS, and only when run (an import changes nothing).
+    for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(_var, "1")
 
 import argparse  # noqa: E402
 import shutil  # noqa: E402
@@ -75,14 +79,12 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 import yaml  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 from enclab.core import atomic, ingest, readers  # noqa: E402
 from enclab.residuals import rig  # noqa: E402
 from enclab.residuals.rig_manifest import rig_groups  # noqa: E402
 from enclab.residuals.rig_report import remains, report_rig, rule_spec, split_table  # noqa: E402
-from provenance import stamp  # noqa: E402
+from .helpers import ROOT, reference_loop_seconds, stamp  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[2]
 RIG = "mrdlab_tool4"
 COMP = {"torque_back": ["linear", "signed_square"], "torque_front": ["linear"]}
 SPACINGS = [0.2, 0.1, 0.07, 0.05, 0.035]
@@ -127,13 +129,6 @@ def load_runs(name: str = RIG, with_group: bool = False):
     return runs, group["splits"]
 
 
-def loop_seconds(n: int = 5_000_000) -> float:
-    """CPU seconds of an ``n``-iteration Python loop: the reference beside a timing."""
-    start = time.process_time()
-    [0 for _ in range(n)]
-    return time.process_time() - start
-
-
 def rule_rows(names) -> list[dict]:
     """The rig rule's model on each rig of ``names``: held-out std per split (and per condition
     value), the extrapolation verdict and the CPU seconds of the fit beside a loop reference."""
@@ -142,13 +137,13 @@ def rule_rows(names) -> list[dict]:
     for name in names:
         runs, splits, group = load_runs(name, with_group=True)
         spec, knots = rule_spec(settings, group["compliance"])
-        ref_before = loop_seconds()
+        ref_before = reference_loop_seconds()
         start = time.process_time()
         out = report_rig(name, group["pairs"][0]["measured"], runs, spec, splits, settings["spacings"],
                          variants="takeup", torque_knots=knots,
                          extrapolation_ratio=settings["extrapolation_ratio"])
         cpu = time.process_time() - start
-        ref = 0.5 * (ref_before + loop_seconds())
+        ref = 0.5 * (ref_before + reference_loop_seconds())
         ext = {e["split"]: e for e in out["block"]["extrapolation"]}
         for sp in out["block"]["splits"]:
             e = ext.get(sp["split"], {})

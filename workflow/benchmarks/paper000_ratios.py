@@ -1,4 +1,6 @@
-"""Paper 000 acceptance tables from a finished run: measured/PQN and measured/exact std ratios.
+"""Does a finished run reproduce paper 000's measured/PQN and measured/exact std ratios?
+
+Paper 000 acceptance tables from a finished run: measured/PQN and measured/exact std ratios.
 
 Reads ``results/batch/pooled.csv`` (repeat groups pooled, ratios with confidence intervals) and
 prints, and writes under ``results/benchmarks/``:
@@ -15,19 +17,17 @@ prints, and writes under ``results/benchmarks/``:
 
 Usage (after ``make run``)::
 
-    .venv/bin/python workflow/benchmarks/paper000_ratios.py [--pooled results/batch/pooled.csv]
+    PYTHONPATH=workflow python -m benchmarks.paper000_ratios [--pooled results/batch/pooled.csv]
 """
 from __future__ import annotations
 
 import argparse
-import datetime
-import platform
-import sys
 from pathlib import Path
 
 import pandas as pd
 import yaml
 
+from .helpers import provenance
 
 def fig6_table(pooled: pd.DataFrame) -> pd.DataFrame:
     pos = pooled[(pooled["order"] == 0) & pooled["signal"].isin(["x", "y", "z"])]
@@ -77,8 +77,7 @@ def main(argv=None) -> None:
     f6.to_csv(out / "fig6_position.csv", index=False)
     f7.to_csv(out / "fig7_derivatives.csv", index=False)
     excl = exclusions(pooled)
-    stamp = {"date": datetime.date.today().isoformat(), "machine": platform.node(),
-             "command": " ".join([Path(sys.argv[0]).name] + (argv if argv is not None else sys.argv[1:]))}
+    stamp = provenance(argv)
     excl_out = pd.concat([pd.DataFrame([stamp] * len(excl)), excl], axis=1)
     path = out / "exact_exclusions.csv"
     excl_out.to_csv(path, mode="a", header=not path.exists(), index=False)

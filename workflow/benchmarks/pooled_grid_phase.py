@@ -19,16 +19,13 @@ the runs, and whether the interval excludes 1. The exact variance is the same fo
 
 Usage::
 
-    .venv/bin/python workflow/benchmarks/pooled_grid_phase.py --logs 'data/sim/phantom_c00_r*.parquet'
-    .venv/bin/python workflow/benchmarks/pooled_grid_phase.py --quick   # 6 logs, 4 filters
+    PYTHONPATH=workflow python -m benchmarks.pooled_grid_phase --logs 'data/sim/phantom_c00_r*.parquet'
+    PYTHONPATH=workflow python -m benchmarks.pooled_grid_phase --quick   # 6 logs, 4 filters
 """
 from __future__ import annotations
 
 import argparse
-import datetime
 import glob
-import platform
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -37,6 +34,8 @@ import scipy.stats
 import yaml
 from enclab.core import quantize
 from enclab.propagation import analysis, filters, theory
+
+from .helpers import provenance
 
 FS = 1000.0
 TRUTH_STEP = 1.25e-4
@@ -85,8 +84,7 @@ def main(argv=None) -> None:
         raise SystemExit(f"--logs {args.logs!r}: need at least 2 logs, found {len(paths)}")
     model = theory.QuantizerErrorModel(STEP, 0.5, truth_step=TRUTH_STEP)
     labels = ["position"] + [f.label() for f in bank]
-    stamp = {"date": datetime.date.today().isoformat(), "machine": platform.node(),
-             "command": " ".join([Path(sys.argv[0]).name] + (argv if argv is not None else sys.argv[1:]))}
+    stamp = provenance(argv)
     first = pd.read_parquet(paths[0])
     joints = [c for c in first.columns if c.endswith("_counts")]
     rows, per_run = [], {}

@@ -1,4 +1,6 @@
-"""Residual stage at any length: false effects on clean logs, power at 3x the threshold.
+"""Does the residual stage hold at any length: clean logs named clean, power at 3x threshold?
+
+Residual stage at any length: false effects on clean logs, power at 3x the threshold.
 
 Question: does the selection stay quiet on clean logs and find an effect at 3x its detection
 threshold, at 4e3, 4e4, 4e5 and 4e6 samples, and does no chosen effect leave the residual worse
@@ -34,18 +36,18 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import ROOT, stamp  # noqa: E402
 
-from enclab.residuals import select as sel  # noqa: E402
-from enclab.residuals import simulate as sim  # noqa: E402
+from enclab.residuals import effects as fx
+from enclab.residuals import select as sel
+from enclab.residuals import simulate as sim
+
+from .helpers import ROOT, parse_shard, stamp, wilson
 
 STEP = 2 * np.pi / 4096
 TRUTH_STEP = STEP / 8
@@ -70,17 +72,11 @@ def make_log(n: int, seed: int, h: float | None) -> dict:
 
 def calibrated_lr(log: dict, effect) -> tuple[float, float, int, float]:
     """``(LR_c, c, n_fit, floor_std)`` of ``effect`` added to the base model of ``log``."""
-    grid, counts = sel._grid_and_counts(log["measured"], STEP)
-    full = sel._make_ctx(log["t"], log["truth"], counts, STEP, TRUTH_STEP, {}, grid, None)
-    every = max(1, math.ceil(full.n / sel._MAX_FIT_SAMPLES))
-    ctx = full if every == 1 else sel._subsample(full, every)
-    base = sel._Model([])
-    x, ll = sel._fit(base, ctx, sel._base_start(ctx))
-    cur = sel._Fitted(base, x, ll)
-    new = sel._extend(cur, effect, ctx)
-    c = sel._inflation(new, effect, ctx)
-    floor = sel.residual_stats(cur, full)["floor_std"]
-    return 2.0 * (new.ll - cur.ll) / c, c, ctx.fit_idx.size, floor
+    grid, counts = sel.grid_and_counts(log["measured"], STEP)
+    fitted = sel.added_effect_fit(log["t"], log["truth"], counts, STEP, TRUTH_STEP, effect, grid=grid,
+                                  subsample=True, with_inflation=True, with_floor=True)
+    c = fitted["inflation"]
+    return 2.0 * (fitted["ll_effect"] - fitted["ll_base"]) / c, c, fitted["n_fit"], fitted["floor_std"]
 
 
 def threshold(n: int, pilots: int, seed0: int = 9000) -> dict:
@@ -89,7 +85,7 @@ def threshold(n: int, pilots: int, seed0: int = 9000) -> dict:
     evid, floors = [], []
     for j in range(pilots):
         log = make_log(n, seed0 + j, h_p)
-        lr, c, n_fit, floor = calibrated_lr(log, sel.fx.Hysteresis())
+        lr, c, n_fit, floor = calibrated_lr(log, fx.Hysteresis())
         floors.append(floor)
         need = BIC_THRESHOLD + math.log(n_fit / c)
         evid.append(h_p * math.sqrt(need / max(lr, 1e-12)))
@@ -119,22 +115,17 @@ def run_draw(n: int, case: str, draw: int, h_test: float) -> dict:
             "transients": len(res.transients), "cpu_s": cpu}
 
 
-def wilson(k: int, n: int, z: float = 1.645) -> tuple[float, float]:
-    """Wilson 90 % interval of a rate ``k / n``."""
-    if n == 0:
-        return float("nan"), float("nan")
-    p = k / n
-    d = 1 + z * z / n
-    c = (p + z * z / (2 * n)) / d
-    w = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / d
-    return max(0.0, c - w), min(1.0, c + w)
+def wilson90(k: int, n: int) -> tuple[float, float]:
+    """Wilson 90 % interval of a rate ``k / n``, clipped to [0, 1]."""
+    lo, hi = wilson(k, n, 1.645)
+    return max(0.0, lo), min(1.0, hi)
 
 
 def summarize(draws: pd.DataFrame, thresholds: pd.DataFrame) -> pd.DataFrame:
     rows = []
     for (n, case), g in draws.groupby(["length", "case"], sort=True):
         k = int(g["correct"].sum()) if case == "hysteresis" else int(g["named"].sum())
-        lo, hi = wilson(k, len(g))
+        lo, hi = wilson90(k, len(g))
         thr = thresholds[thresholds["length"] == n]
         rows.append({
             "length": int(n), "case": case, "draws": len(g),
@@ -167,13 +158,6 @@ def save(out: Path, old: pd.DataFrame, rows: list, thr_old: pd.DataFrame, thr_ro
                          for r in summary.itertuples()])
     stamp(pd.concat([prov, summary], axis=1)).to_csv(out / "residual_length.csv", index=False)
     return summary
-
-
-def parse_shard(text: str) -> tuple[int, int]:
-    i, n = (int(v) for v in text.split("/"))
-    if not (n >= 1 and 0 <= i < n):
-        raise argparse.ArgumentTypeError(f"--shard must be i/n with 0 <= i < n, got {text!r}")
-    return i, n
 
 
 def main(argv=None) -> int:

@@ -1,4 +1,6 @@
-"""Sensors that are not hard quantizers through the residual stage: floor kind, map, lookup table.
+"""Does the residual stage read sensors that are not hard quantizers right?
+
+Sensors that are not hard quantizers through the residual stage: floor kind, map, lookup table.
 
 Question: on a magnetic encoder (1st-4th harmonic error, noise), a resolver (2nd harmonic), a
 potentiometer (nonlinear track, noise) and a servo (filtered output sensor and motor encoder on
@@ -11,39 +13,31 @@ writes its lookup table under ``results/benchmarks/sensor_maps/``. One row per d
 ``results/benchmarks/sensor_maps.csv``; ``ref_loop_s`` is a 5M-iteration Python loop timed
 beside each draw (the stage's seconds are comparable only as a ratio to it on a shared machine).
 
-    python workflow/benchmarks/sensor_maps.py [--draws 2] [--duration 8] [--seed 20261204]
+    PYTHONPATH=workflow python -m benchmarks.sensor_maps [--draws 2] [--duration 8] [--seed 20261204]
 """
 from __future__ import annotations
 
 import argparse
 import json
 import pathlib
-import sys
 import time
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+import numpy as np
+import pandas as pd
 
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
-from provenance import stamp  # noqa: E402
+from enclab.residuals import lookup_table as lut
+from enclab.residuals import pipeline
+from enclab.residuals.simulate import SENSORS, sensor_canonical, simulate_sensor
 
-from enclab.residuals import lookup_table as lut  # noqa: E402
-from enclab.residuals import pipeline  # noqa: E402
-from enclab.residuals.simulate import SENSORS, sensor_canonical, simulate_sensor  # noqa: E402
+from .helpers import reference_loop_seconds, stamp
 
 MAPS = {"angle_harmonics", "harmonic_map", "calibration_map", "scale_mismatch"}
-
-
-def ref_loop() -> float:
-    t = time.perf_counter()
-    [0 for _ in range(5_000_000)]
-    return time.perf_counter() - t
 
 
 def one(kind: str, seed: int, duration: float, out: pathlib.Path) -> dict:
     sim = simulate_sensor(np.random.default_rng(seed), kind, duration=duration)
     df, meta, pair, settings = sensor_canonical(sim, f"{kind}_{seed}")
-    ref = ref_loop()
+    ref = reference_loop_seconds(clock=time.perf_counter)
     t0 = time.process_time()
     block, _, _ = pipeline.analyse_channel(df, meta, pair, settings)
     cpu = time.process_time() - t0

@@ -757,3 +757,45 @@ def simulate_counts(rng, t, step, A12, a_eq, f_hz, phase, t_ref=0.0, noise_std=0
     if jump is not None:
         out[:, int(jump[0]):] += int(jump[1])
     return out[0] if n_rep is None else out
+
+
+#: Bound (standard deviations) beyond which an interval's far edge is dropped.
+INTERVAL_DEPTH = _DEEP
+#: Share of near entries from which the likelihood evaluates every entry in place.
+INTERVAL_DENSE_SHARE = _DENSE_SHARE
+
+
+def log_interval_probability(lower, upper, path: str = "rows"):
+    """``log(Phi(upper) - Phi(lower))`` by one of the likelihood's evaluation paths.
+
+    The likelihood of a reading is the probability of its interval; this exposes the paths
+    that compute it so that their cost and agreement can be measured on their own.
+
+    Parameters
+    ----------
+    lower, upper : numpy.ndarray
+        Interval bounds in standard deviations, ``lower < upper``.
+    path : {"rows", "gathered", "in_place"}
+        ``"rows"``: row sums of 2-d bounds, by the path the likelihood picks from the share
+        of near entries (an entry is near when ``lower >= -INTERVAL_DEPTH`` or
+        ``upper <= INTERVAL_DEPTH``; every other entry is ~0); ``"gathered"``: every entry of
+        1-d bounds of near entries, evaluated by kind; ``"in_place"``: every entry of 1-d
+        bounds, evaluated in place.
+
+    Returns
+    -------
+    numpy.ndarray
+        One value per row (``"rows"``) or per entry.
+
+    Raises
+    ------
+    ValueError
+        For an unknown ``path``.
+    """
+    if path == "rows":
+        return _log_interval_rows(lower, upper)
+    if path == "gathered":
+        return _log_interval_sparse(lower, upper)
+    if path == "in_place":
+        return _log_interval_dense(lower, upper)
+    raise ValueError(f"path must be 'rows', 'gathered' or 'in_place', got {path!r}")

@@ -1086,3 +1086,20 @@ def map_fit(t, counts, step, f_hz=None, harmonics=(), effects=(), start=None,
             "extra_scale": setup["extra_scale"], "bounds": bounds,
             "steps_pp": setup["init"]["steps_pp"], "dt": float(np.median(np.diff(t))),
             "init": {k: v for k, v in setup["init"].items() if k != "cycles"}}
+
+
+def log_interval_probability(lower, upper) -> np.ndarray:
+    """``log(Phi(upper) - Phi(lower))`` elementwise, as the fit's likelihood computes it.
+
+    Parameters
+    ----------
+    lower, upper : numpy.ndarray
+        Interval bounds in standard deviations, ``lower < upper`` (broadcast together); the
+        intervals must be a few standard deviations wide (see :func:`_log_interval_prob`).
+
+    Returns
+    -------
+    numpy.ndarray
+        The log-probability of each interval under a standard normal.
+    """
+    return _log_interval_prob(lower, upper)

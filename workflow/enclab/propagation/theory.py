@@ -1133,3 +1133,22 @@ def worst_case_trajectory_derivative_joint(J, H, phi, h, max_abs_err, third_deri
         + np.abs(c) @ emax
         + remainder[None, :] * np.sum(np.abs(phi), axis=1)[:, None]
     )
+
+
+def filtered_variance(r_h: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Variance of a stationary error through a linear filter, from their correlations.
+
+    Parameters
+    ----------
+    r_h : numpy.ndarray
+        The filter's impulse autocorrelation at lags ``0 .. L-1``
+        (:func:`impulse_autocorrelation`).
+    c : numpy.ndarray
+        The error's autocovariance at lags ``0 .. L-1`` along the last axis (at least ``L``).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``sum_{m=-(L-1)}^{L-1} r_h(|m|) c(|m|)`` along the last axis.
+    """
+    return _two_sided_sum(r_h, c)

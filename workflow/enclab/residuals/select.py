@@ -1654,3 +1654,132 @@ def _message(effects, explained, before, after=None):
         return f"{names} reduces the residual, but a significant residual remains: unexplained{caveat}"
     return (f"{names} reduces the residual std from {before['std']:.3g} to {after['std']:.3g} rad, "
             f"still {_ratio(after):.3g}x the exact-model floor: the rest is unexplained{caveat}")
+
+
+# ----------------------------------------------------------------------------- public wrappers
+# Entry points for benchmarks that measure one step of the selection on its own.
+
+
+def grid_and_counts(measured, step) -> tuple[float, np.ndarray]:
+    """The measured channel's grid offset and its integer counts.
+
+    Parameters
+    ----------
+    measured : numpy.ndarray
+        Measured angles (rad) on a grid of ``step``.
+    step : float
+        The measured channel's step (rad).
+
+    Returns
+    -------
+    grid : float
+        The grid's offset (rad), from the readings' circular mean phase.
+    counts : numpy.ndarray of int64
+        ``round((measured - grid) / step)``.
+
+    Raises
+    ------
+    ValueError
+        When more than 1 % of the readings lie more than 0.05 step off the grid.
+    """
+    return _grid_and_counts(measured, step)
+
+
+def added_effect_fit(t, truth, counts, step, truth_step, effect, *, aux=None, grid=0.0,
+                     line_pitch=None, subsample=False, with_inflation=False,
+                     with_floor=False) -> dict:
+    """The base model of a log, fitted, and the same model with one effect added.
+
+    The selection's own steps for a single candidate, without choosing: the base model (the
+    exact quantizer alone) is fitted, ``effect`` is added from the base fit's parameters and
+    the extended model fitted.
+
+    Parameters
+    ----------
+    t, truth : numpy.ndarray
+        Sample times (s) and the truth channel's angles (rad).
+    counts : numpy.ndarray of int
+        The measured channel's counts (see :func:`grid_and_counts`).
+    step, truth_step : float
+        The measured and the truth channel's steps (rad).
+    effect : object
+        An effect instance of :data:`enclab.residuals.effects.EFFECTS`.
+    aux : dict, optional
+        Logged covariates by name (e.g. ``torque``).
+    grid : float
+        The measured grid's offset (rad).
+    line_pitch : float, optional
+        The sensor's line pitch (rad); default 4 steps.
+    subsample : bool
+        Fit every ``ceil(n / 50 000)``-th sample, as the selection does on long logs;
+        ``False`` fits every sample.
+    with_inflation : bool
+        Also return the variance inflation of the effect's score (the evidence's correction
+        for correlated residuals; ``1`` for independent samples).
+    with_floor : bool
+        Also return the base fit's exact-model floor (rad) over every sample.
+
+    Returns
+    -------
+    dict
+        ``ll_base`` and ``ll_effect`` (log-likelihoods; ``ll_effect`` is ``nan`` when the
+        effect declines the log), ``k`` (the effect's parameter count), ``n_fit`` (samples
+        fitted), and ``inflation`` and ``floor_std`` when asked for.
+    """
+    full = _make_ctx(t, truth, counts, step, truth_step, aux or {}, grid, line_pitch)
+    every = max(1, math.ceil(full.n / _MAX_FIT_SAMPLES)) if subsample else 1
+    ctx = full if every == 1 else _subsample(full, every)
+    base = _Model([])
+    x, ll = _fit(base, ctx, _base_start(ctx))
+    cur = _Fitted(base, x, ll)
+    new = _extend(cur, effect, ctx)
+    out = {"ll_base": cur.ll, "ll_effect": math.nan if new is None else new.ll,
+           "k": 0 if new is None else new.model.n_params() - base.n_params(),
+           "n_fit": ctx.fit_idx.size}
+    if with_inflation:
+        out["inflation"] = 1.0 if new is None else _inflation(new, effect, ctx)
+    if with_floor:
+        out["floor_std"] = residual_stats(cur, full)["floor_std"]
+    return out
+
+
+def floor_interval_terms(t, truth, counts, step, truth_step, reach: int = 3) -> dict:
+    """The terms of the floor verdict on a log the base model describes, two ways.
+
+    The base model is fitted; the floor's variance and the residual's come from
+    :func:`residual_stats`, and the standard error of the floor's interval both as the
+    verdict computes it (the larger of time blocks and angle bins) and from time blocks alone
+    (with the truth's rounding summed over ``reach`` cells each side and no position noise).
+
+    Parameters
+    ----------
+    t, truth : numpy.ndarray
+        Sample times (s) and the truth channel's angles (rad).
+    counts : numpy.ndarray of int
+        The measured channel's counts.
+    step, truth_step : float
+        The measured and the truth channel's steps (rad).
+    reach : int
+        Truth cells summed each side for the time-block error.
+
+    Returns
+    -------
+    dict
+        ``floor_var`` and ``residual_var`` (rad^2), ``se_time_blocks`` and ``se_library``
+        (standard errors of the floor's variance), and the quantiles the verdict uses:
+        ``z90`` (the 90 % interval's) and ``t99`` (the limit's, over the time blocks).
+    """
+    ctx = _make_ctx(t, truth, counts, step, truth_step, {}, 0.0, None)
+    model = _Model([])
+    x, ll = _fit(model, ctx, _base_start(ctx))
+    lib = residual_stats(_Fitted(model, x, ll), ctx)
+    floor_var = lib["floor_std"] ** 2
+    mu, _ = model.forward(ctx, x)
+    r = step * (ctx.counts - np.floor(mu))
+    js = np.arange(-reach, reach + 1)
+    probs = _floor_probs(mu, 0.5 * truth_step / step, np.full(mu.size, 1e-9), js)
+    er2 = step**2 * ((js[:, None] ** 2) * probs).sum(axis=0)
+    return {"floor_var": floor_var, "residual_var": r.var(),
+            "se_time_blocks": _block_se(r**2 - er2, np.array_split(np.arange(r.size), _FLOOR_BLOCKS)),
+            "se_library": (lib["floor_limit"] ** 2 - floor_var) / _T99_BLOCKS,
+            "z90": _Z90, "t99": _T99_BLOCKS}
