@@ -30,7 +30,7 @@ FOREIGN = re.compile(r"\bDESIGN\b|(?<![\w.~-])/(?:work|home|tmp)/")
 
 def _slug(heading: str) -> str:
     """GitHub's anchor of a heading: lower case, punctuation dropped, spaces to hyphens."""
-    text = re.sub(r"[`*_]{1,2}(?=\S)|(?<=\S)[`*_]{1,2}", "", heading.strip()).lower()
+    text = re.sub(r"[`*]", "", heading.strip()).lower()
     return re.sub(r"[^\w\- ]", "", text).replace(" ", "-")
 
 
@@ -72,6 +72,7 @@ def test_relative_links_resolve_inside_the_repository(page):
 def test_slugs_follow_github():
     assert _slug("Rigs: several runs together") == "rigs-several-runs-together"
     assert _slug("`summary.json`") == "summaryjson"
+    assert _slug("challenge_residuals_floor_summary") == "challenge_residuals_floor_summary"
     assert _slug("Inside a PID loop: closed-loop benchmark") == "inside-a-pid-loop-closed-loop-benchmark"
 
 
