@@ -73,7 +73,8 @@ def test_slugs_follow_github():
     assert _slug("Rigs: several runs together") == "rigs-several-runs-together"
     assert _slug("`summary.json`") == "summaryjson"
     assert _slug("challenge_residuals_floor_summary") == "challenge_residuals_floor_summary"
-    assert _slug("Inside a PID loop: closed-loop benchmark") == "inside-a-pid-loop-closed-loop-benchmark"
+    assert (_slug("Inside a PID loop: closed-loop benchmark")
+            == "inside-a-pid-loop-closed-loop-benchmark")
 
 
 # a section named in prose or a comment: README "Running on a cluster", docs/x.md "How it runs"

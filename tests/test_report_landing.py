@@ -190,7 +190,8 @@ def test_a_real_report_opens_on_the_verdicts_and_figures(tmp_path):
     desc = json.loads(re.search(r"var workflow_desc = (.*?);\n", html).group(1))
     items = _elements(desc)
     kinds = [(i["tag"], i["class"]) for i in items]
-    assert kinds.index(("table", "enclab-verdicts docutils")) < kinds.index(("div", "enclab-figures"))
+    table = kinds.index(("table", "enclab-verdicts docutils"))
+    assert table < kinds.index(("div", "enclab-figures"))
     (image,) = [i for i in items if i["tag"] == "img"]
     assert (results / image["attrs"]["src"]).is_file()  # next to report.html
     embedded = json.loads(re.search(r"var results = (\{.*?\});\n", html, re.S).group(1))

@@ -24,7 +24,7 @@ __all__ = ["failure_of", "headline_figures", "report_metadata", "run_summary", "
 _ORDER_NAMES = {0: "position", 1: "velocity", 2: "acceleration"}
 _LRDE_QUANTITIES = ("A12", "E_b", "offset_a", "bias_b")
 # The thumbnails rule report_thumbnails writes (results/report/thumbs/<kind>/<name>.png); the
-# landing page embeds them, and each caption links its full-size figure.
+# landing page shows them, each linking its full-size figure.
 _THUMBS = "results/report/thumbs"
 # Lines of each analysis in the landing page's verdict table; the rest follow below it.
 _VERDICT_LINES = 3
@@ -452,8 +452,8 @@ def summary_rst(run: Mapping) -> str:
     At the top what a lab would print: one line of counts, the verdict table (each analysis
     and its first lines, the failed logs) and the headline figure of each analysis
     (:func:`headline_figures`); below, every line of an analysis the table cut short, the
-    failures, warnings and what was written. The report renders this page as a Jinja template, so
-    it is wrapped in a raw block.
+    failures, warnings and what was written. The report renders this page as a Jinja
+    template, so it is wrapped in a raw block.
     """
     logs = run["logs"]
     out = ["{% raw %}", "enclab run summary", "==================", "",
