@@ -45,7 +45,8 @@ def test_analyse_lrde_log_block_matches_design_contract():
     assert all(isinstance(f, Figure) for f in figures.values())
     assert "stroke A12" in md and "Sampler diagnostics" in md
     # The held-out comparison of motion, encoder and clock effects ran (a clean sinusoid:
-    # compare.py's own tests check which model wins) and fills DESIGN's residuals block.
+    # compare.py's own tests check which model wins) and fills the residuals block
+    # (docs/output-contract.md).
     labels = [m["label"] for m in block["model"]["models"]]
     assert labels[:2] == ["sinusoid", "harmonic3"]
     assert set(labels) >= {"hysteresis", "drift", "count_jump", "time_jitter"}

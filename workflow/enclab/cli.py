@@ -8,7 +8,9 @@
 Each analysis command writes a one-entry manifest for the file and a configuration (the
 project's ``config.yaml``, or ``--configfile``) into an output folder (default
 ``enclab-<log id>/`` in the current directory), runs the Snakemake workflow there and prints
-where the results are and what they say. The file is read in place and never modified.
+where the results are and what they say. The file is read in place and never modified. The
+workflow is the checkout's, or the copy a plain install carries
+(:func:`enclab.core.resources.workflow_root`).
 
 Subcommands live in :data:`COMMANDS` (built here) and :data:`EXTERNAL_COMMANDS` (a module's
 ``main(argv)``, imported when called): a new analysis adds one entry.
@@ -31,11 +33,12 @@ from enclab import report
 from enclab.core import atomic
 from enclab.core.errors import EnclabInputError
 from enclab.core.manifest import validate_manifest
+from enclab.core.resources import workflow_root
 
 __all__ = ["COMMANDS", "EXTERNAL_COMMANDS", "build_entry", "main"]
 
-# The repository an editable install points at: Snakefile, config.yaml, workflow/.
-ROOT = Path(enclab.__file__).resolve().parents[2]
+# Snakefile, config.yaml, workflow/ and scripts/: the checkout's, or the installed copy.
+ROOT = workflow_root()
 _FORMATS = {".csv": "csv", ".txt": "text", ".dat": "text", ".tsv": "text", ".parquet": "parquet",
             ".mat": "mat"}
 
@@ -147,8 +150,8 @@ def _results_listing(out: Path, log_id: str) -> list[str]:
 
 def _run_analysis(command: str, args: argparse.Namespace) -> int:
     if not (ROOT / "Snakefile").is_file():
-        print(f"enclab {command}: the workflow (Snakefile) is not next to the package in {ROOT}; "
-              "install enclab from its repository (pip install -e .)", file=sys.stderr)
+        print(f"enclab {command}: the workflow (Snakefile) is missing from {ROOT}; reinstall "
+              "enclab from its repository (pip install .)", file=sys.stderr)
         return 2
     path = Path(args.file)
     if not path.is_file():

@@ -3,11 +3,13 @@
 :func:`run_summary` condenses the per-log ``summary.json`` files, the batch tables and the
 error lines of the logs that failed into one dictionary (``results/summary.json``);
 :func:`summary_text` prints it at the end of ``make run`` and :func:`summary_rst` is the page
-the HTML report opens on. Pure functions: the rule script ``scripts/run_summary.py`` reads the
-files and writes the results.
+the HTML report opens on: the verdict of each analysis in one table and its headline figure
+(:func:`headline_figures`) at the top, the details below. Pure functions: the rule script
+``scripts/run_summary.py`` reads the files and writes the results.
 """
 from __future__ import annotations
 
+import html
 import math
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -16,10 +18,16 @@ import pandas as pd
 
 from enclab.residuals.pipeline import batch_rows as residual_rows
 
-__all__ = ["failure_of", "report_metadata", "run_summary", "summary_rst", "summary_text"]
+__all__ = ["failure_of", "headline_figures", "report_metadata", "run_summary", "summary_rst",
+           "summary_text"]
 
 _ORDER_NAMES = {0: "position", 1: "velocity", 2: "acceleration"}
 _LRDE_QUANTITIES = ("A12", "E_b", "offset_a", "bias_b")
+# The thumbnails rule report_thumbnails writes (results/report/thumbs/<kind>/<name>.png); the
+# landing page shows them, each linking its full-size figure.
+_THUMBS = "results/report/thumbs"
+# Lines of each analysis in the landing page's verdict table; the rest follow below it.
+_VERDICT_LINES = 3
 
 
 def failure_of(log_texts: Mapping[str, str]) -> dict:
@@ -341,17 +349,122 @@ def _rst_text(text: Any) -> str:
     return text
 
 
+def headline_figures(run: Mapping) -> list[dict]:
+    """The figure that heads each analysis that ran, for the report's landing page.
+
+    Parameters
+    ----------
+    run : mapping
+        A :func:`run_summary` dictionary.
+
+    Returns
+    -------
+    list of dict
+        In the order the analyses are reported: ``analysis``, ``thumbnail`` (the path of the
+        report thumbnail, relative to the run's folder), ``figure`` (the full-size figure,
+        relative to ``results/``, where the report lies) and ``caption``. Quantization: the
+        measured/predicted ratios of the batch; low-resolution encoder: the bias per cycle of
+        the first log; residuals: before and after the effects of the first channel left
+        unexplained (else the first channel); rigs: the first rig's held-out error; design: the
+        Pareto front.
+    """
+    analyses = run["analyses"]
+    out = []
+
+    def add(analysis, kind, name, figure, caption):
+        out.append({"analysis": analysis, "thumbnail": f"{_THUMBS}/{kind}/{name}.png",
+                    "figure": figure, "caption": caption})
+
+    if analyses.get("quantization"):
+        add("quantization", "ratio_figure", "ratios", "figures/ratios.png",
+            "measured std over PQN's and over the exact model's, every row of the batch")
+    if analyses.get("lrde"):
+        log = analyses["lrde"]["rows"][0]["log_id"]
+        add("low-resolution encoder", "lrde_bias_cycles", log, f"{log}/lrde/bias_cycles.png",
+            f"{log}: the bias deviation E_b of every cycle, inside Proposition 1's band")
+    if analyses.get("residuals"):
+        rows = analyses["residuals"]["rows"]
+        row = next((r for r in rows if not r.get("explained")), rows[0])
+        log, channel = row["log_id"], row["measured"]
+        add("residuals", "residual_before_after", f"{log}/{channel}",
+            f"{log}/residuals/{channel}/before_after.png",
+            f"{log}/{channel}: the residual before and after the effects ({row['verdict']})")
+    if analyses.get("rigs"):
+        row = analyses["rigs"]["rows"][0]
+        rig, channel = row["rig"], row["measured"]
+        add("rigs", "rig_heldout", f"{rig}/{channel}", f"rigs/{rig}/{channel}/heldout.png",
+            f"{rig}/{channel}: held-out error before and after the rig model")
+    if analyses.get("design"):
+        add("design", "design_pareto", "pareto", "design/pareto.png",
+            "every feasible design by cost and lag; the chosen one")
+    return out
+
+
+def _verdict_table(run: Mapping) -> list[str]:
+    """An rst list-table: each analysis and its first lines; failed logs last."""
+    rows = []
+    for title, items in _headlines(run):
+        shown = [_rst_text(item) for item in items[:_VERDICT_LINES]]
+        if len(items) > _VERDICT_LINES:
+            shown.append(f"... {len(items) - _VERDICT_LINES} more below")
+        rows.append((_rst_text(title), shown or ["(no rows)"]))
+    if run["failed"]:
+        rows.append(("failed", [f"{_count(len(run['failed']), 'log')}: "
+                                + ", ".join(f"``{f['log_id']}``" for f in run["failed"])]))
+    if not rows:
+        return []
+    out = [".. list-table::", "   :class: enclab-verdicts", "   :header-rows: 1",
+           "   :widths: 22 78", "", "   * - analysis", "     - result"]
+    for title, lines in rows:
+        out.append(f"   * - **{title}**")
+        out.append(f"     - - {lines[0]}")
+        out += [f"       - {line}" for line in lines[1:]]
+    return out + [""]
+
+
+def _figure_block(run: Mapping) -> list[str]:
+    """The headline figures as raw HTML, side by side (``.enclab-figures`` in report.css).
+
+    Each image is the thumbnail next to the report (``results/report.html`` reads
+    ``report/thumbs/...``); a report moved away from ``results/`` falls back to the copy
+    Snakemake embeds in it (its ``results`` table, keyed by the path from the run's folder).
+    Each links its full-size figure.
+    """
+    figures = headline_figures(run)
+    if not figures:
+        return []
+    out = [".. raw:: html", "", '   <div class="enclab-figures">']
+    for f in figures:
+        local = f["thumbnail"].removeprefix("results/")
+        fallback = ("this.onerror=null; var r = window.results && window.results["
+                    f"'{f['thumbnail']}']; if (r) this.src = r.data_uri;")
+        caption = f"<strong>{html.escape(f['analysis'])}</strong>: {html.escape(f['caption'])}"
+        out += ['   <figure class="enclab-figure">',
+                f'   <a href="{html.escape(f["figure"])}"><img src="{html.escape(local)}" '
+                f'alt="{html.escape(f["analysis"])}" onerror="{html.escape(fallback)}"></a>',
+                f"   <figcaption>{caption}</figcaption>", "   </figure>"]
+    return out + ["   </div>", ""]
+
+
 def summary_rst(run: Mapping) -> str:
     """The run summary as reStructuredText: the page the HTML report opens on.
 
-    The report renders this page as a Jinja template, so it is wrapped in a raw block.
+    At the top what a lab would print: one line of counts, the verdict table (each analysis
+    and its first lines, the failed logs) and the headline figure of each analysis
+    (:func:`headline_figures`); below, every line of an analysis the table cut short, the
+    failures, warnings and what was written. The report renders this page as a Jinja
+    template, so it is wrapped in a raw block.
     """
     logs = run["logs"]
     out = ["{% raw %}", "enclab run summary", "==================", "",
            f"**{_count(logs['total'], 'log')}**: {logs['completed']} completed, "
            f"**{logs['failed']} failed**{_not_run_count(run)}.",
            ""]
-    for title, items in _headlines(run):
+    out += _verdict_table(run)
+    out += _figure_block(run)
+    # every line of the analyses the verdict table cut short
+    longer = [(title, items) for title, items in _headlines(run) if len(items) > _VERDICT_LINES]
+    for title, items in longer:
         out += [f"**{_rst_text(title)}**", ""]
         out += [f"- {_rst_text(item)}" for item in items] + [""]
     if run["failed"]:
@@ -367,8 +480,8 @@ def summary_rst(run: Mapping) -> str:
         out += ["**Warnings**", ""]
         out += [f"- ``{w['log_id']}``: {_rst_text(w['warning'])}" for w in run["warnings"]] + [""]
     if run.get("written"):
-        out += [f"Written under ``results/``: {_rst_text(_written_line(run))}. Figures appear "
-                "here as thumbnails; each caption links the full-size figure.", ""]
+        out += [f"Written under ``results/``: {_rst_text(_written_line(run))}. Every figure is "
+                "in the report as a thumbnail; each caption links the full-size figure.", ""]
     out += ["{% endraw %}", ""]
     return "\n".join(out)
 

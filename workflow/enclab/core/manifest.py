@@ -11,14 +11,13 @@ import codecs
 import copy
 import functools
 import posixpath
-from pathlib import Path
 from typing import Any
 
 import jsonschema
 import yaml
 
-import enclab
 from enclab.core.errors import EnclabInputError
+from enclab.core.resources import workflow_root
 
 __all__ = [
     "READER_KEYS",
@@ -30,7 +29,8 @@ __all__ = [
     "validate_manifest",
 ]
 
-SCHEMA_PATH = Path(enclab.__file__).parents[1] / "schemas" / "manifest.schema.yaml"
+# The repository's schema, or the copy a plain install carries (enclab.core.resources).
+SCHEMA_PATH = workflow_root() / "workflow" / "schemas" / "manifest.schema.yaml"
 
 # Reader keys that apply to each format (the schema says the others must be left out).
 READER_KEYS = {

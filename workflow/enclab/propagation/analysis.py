@@ -17,7 +17,7 @@ Stages
 :func:`theory_rows`
     Table II (PQN and worst case), the exact non-white model and the trajectory bound.
 :func:`build_summary`
-    ``summary.json`` (DESIGN section 3) from the two row sets.
+    ``summary.json`` (docs/output-contract.md) from the two row sets.
 
 A *row key* is ``(level, signal, order, filter label or "", architecture or "")``: positions
 have order 0 and no filter; derivative rows have order ``d`` of their filter. Joint signals
@@ -657,7 +657,7 @@ def log_header(meta: Mapping) -> dict:
 
 def build_summary(meta: Mapping, levels: Sequence[Mapping], empirical: Sequence[Mapping],
                   theory: Sequence[Mapping], centre_rad: Sequence[float] = ()) -> dict:
-    """``summary.json`` for one log: DESIGN section 3 keys plus provenance.
+    """``summary.json`` for one log: the keys of docs/output-contract.md plus provenance.
 
     Raises
     ------

@@ -429,8 +429,9 @@ def before_after_table(log_id, pair, step, diag, r_after, lib_before, lib_after,
 def summary_block(blocks: list[Mapping]) -> dict | None:
     """The ``residuals`` block of summary.json from the channel blocks of one log.
 
-    DESIGN section 3 keys (``metric``, ``before``, ``after``, ``effects``) are those of the
-    first measured channel (manifest order); every channel's block is under ``channels``.
+    The contract keys (``metric``, ``before``, ``after``, ``effects``: docs/output-contract.md)
+    are those of the first measured channel (manifest order); every channel's block is under
+    ``channels``.
     """
     if not blocks:
         return None
