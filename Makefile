@@ -72,7 +72,7 @@ test-fast: $(STAMP)
 
 # Opt-in, needs root: installs Debian's SLURM and MariaDB packages, starts a one-node cluster on
 # localhost, runs the workflow through --executor slurm, compares with a local run, stops the
-# cluster (README "Running on a cluster (SLURM)"). Not part of `make test` or CI.
+# cluster (docs/cluster.md). Not part of `make test` or CI.
 test-slurm: $(SLURM_STAMP)
 	bash .ci/slurm/test.sh
 

@@ -17,6 +17,7 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from enclab.lrde import dwell, model
+from enclab.lrde import effects as lrde_effects
 
 __all__ = ["corner_plot", "posterior_predictive_dwell", "dwell_ppc_plot", "closed_loop_plot",
            "bias_cycles_plot", "truth_bias_deviation", "misfit_plot", "loop_corner_plot"]
@@ -34,8 +35,8 @@ def corner_plot(fit, truths: dict | None = None) -> Figure:
         True values (SI) by parameter name, drawn as lines (simulated data).
     """
     extra = fit.param_names[5:]
-    effect_axes = {"hysteresis": (_DEG, "hysteresis w [deg]"), "drift": (1.0, "drift [1/s]"),
-                   "time_jitter": (1e6, "time jitter [us]")}
+    effect_axes = {name: term.display for name, term in lrde_effects.REGISTRY.items()
+                   if term.display[1]}  # each term's own axis (scale, label)
     scale = np.array([_DEG, _DEG, 1.0, 1.0, _DEG]
                      + [effect_axes.get(name, (_DEG, ""))[0] for name in extra])
     labels = [r"$A_{12}$ [deg]", r"$E_b$ [deg]", r"$f$ [Hz]", r"phase [rad]",

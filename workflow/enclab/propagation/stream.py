@@ -34,7 +34,7 @@ path does not write the intermediate tables (``requantized``/``kinematics``/``de
 Parquet, 6-23 GB for one hour) nor the theory (its exact model needs lagged products over the
 whole trajectory).
 
-Usage (see the README, "Long logs")::
+Usage (see docs/long-logs.md)::
 
     python -m enclab.propagation.stream generate results/benchmarks/long_franka.parquet --duration-s 3600
     python -m enclab.propagation.stream moments results/benchmarks/long_franka.parquet moments.json
