@@ -6,7 +6,7 @@ error line and the others go on (rule publish_log then fails for that log alone)
 chunk's record (token, failures) makes the next run retry a failed log."""
 import logging
 
-from enclab import stages
+from enclab.propagation import pipeline
 from enclab.runner import record_chunk, run, run_chunk
 
 
@@ -16,7 +16,7 @@ def main(smk):
               "moments": p.moments}
     figures = set(p.figures)
     status = run_chunk(
-        p.entries, lambda entry, folder: stages.quantization_log(
+        p.entries, lambda entry, folder: pipeline.quantization_log(
             entry, folder, config, p.data_root, figures=entry["id"] in figures),
         smk.output.staging, data_root=p.data_root)
     record_chunk(p.record, p.retry, status)

@@ -13,8 +13,8 @@ Subpackages (each with its entry points in its docstring):
   explains it
 - :mod:`enclab.design`       encoder resolution and derivative filter for an error budget
 
-Workflow glue: :mod:`enclab.stages` (per-log stages), :mod:`enclab.runner` (script runner),
-:mod:`enclab.report` (run summary), :mod:`enclab.progress` (progress lines), :mod:`enclab.cli`
+Workflow glue: :mod:`enclab.log_summary` (a log's summary.json), :mod:`enclab.runner` (script
+runner), :mod:`enclab.report` (run summary), :mod:`enclab.progress` (progress lines), :mod:`enclab.cli`
 (the ``enclab`` command).
 """
 from __future__ import annotations

@@ -1,8 +1,8 @@
 # Chunked mode, the default (config chunk_size = K > 0; common.smk cuts the chunks; 0 = one job
 # per stage and log). A Snakemake `script:` job starts a new Python and imports the package:
 # with one job per stage and log that start-up costs more than the work of a short log. Here one
-# job runs every paper-000 stage of K logs (scripts/process_chunk.py, the same enclab.stages
-# calls as the per-stage rules), and draws the per-log figures of the logs that show them,
+# job runs every quantization-error stage of K logs (scripts/process_chunk.py, the same
+# enclab.propagation.pipeline calls as the per-stage rules), and draws the per-log figures of the logs that show them,
 # staging each log's outputs; then one shell job per log hard-links them into results/<log_id>/
 # or fails with that log's error line, so a bad log still fails alone, leaves no output, and the
 # rest of the workflow (batch tables, `make run`'s second pass) sees the usual per-log files.
