@@ -13,7 +13,7 @@ from enclab.core import readers as enclab_readers
 from enclab.core import manifest as enclab_manifest
 from enclab.core.errors import EnclabInputError
 from enclab.residuals.pipeline import residual_pairs as enclab_residual_pairs
-from enclab.residuals.rig_manifest import rig_groups as enclab_rig_groups
+from enclab.rig.manifest import rig_groups as enclab_rig_groups
 
 
 with open(os.path.join(workflow.basedir, "workflow/schemas/config.schema.yaml")) as handle:
