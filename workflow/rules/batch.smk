@@ -36,7 +36,7 @@ rule ratio_figure:
 
 
 # Requested only when the manifest holds the configured Fig. 6 level and Fig. 7 group
-# (see paper_figures_apply in common.smk).
+# (enclab.plan.Plan.paper_figures).
 rule paper_figures:
     input:
         pooled="results/batch/pooled.csv",
@@ -55,7 +55,7 @@ rule paper_figures:
 
 
 # ----------------------------------------------------------------------------- run summary, report
-# The figures' thumbnails and the run summary (helpers in common.smk: REPORT_FIGURES).
+# The figures' thumbnails and the run summary (enclab.plan: REPORT_FIGURES, Plan.report_figures).
 
 
 rule report_thumbnails:

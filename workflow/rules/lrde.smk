@@ -11,7 +11,7 @@ rule lrde_fit:
         cycles="results/{log_id}/lrde/cycles.csv",
         report=report("results/{log_id}/lrde/report.md", category="Paper 002",
                       subcategory="{log_id}", caption="../report/lrde_report.rst"),
-        # figures: in the report as thumbnails (REPORT_FIGURES, batch.smk)
+        # figures: in the report as thumbnails (enclab.plan.REPORT_FIGURES)
         corner="results/{log_id}/lrde/corner.png",
         dwell="results/{log_id}/lrde/dwell_ppc.png",
         bias_cycles="results/{log_id}/lrde/bias_cycles.png",

@@ -10,7 +10,7 @@ rule residuals:
         block="results/{log_id}/residuals/{channel}/residuals.json",
         table=report("results/{log_id}/residuals/{channel}/before_after.csv", category="Residuals",
                      subcategory="{log_id}", caption="../report/residual_table.rst"),
-        # figures: in the report as thumbnails (REPORT_FIGURES, batch.smk)
+        # figures: in the report as thumbnails (enclab.plan.REPORT_FIGURES)
         diagnostics="results/{log_id}/residuals/{channel}/diagnostics.png",
         before_after="results/{log_id}/residuals/{channel}/before_after.png",
         covariates="results/{log_id}/residuals/{channel}/covariates.png",

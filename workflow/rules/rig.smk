@@ -12,7 +12,7 @@ rule rig:
         heldout="results/rigs/{rig}/{channel}/heldout.csv",
         splits="results/rigs/{rig}/{channel}/splits.csv",
         conditions="results/rigs/{rig}/{channel}/conditions.csv",
-        # figures: in the report as thumbnails (REPORT_FIGURES, common.smk)
+        # figures: in the report as thumbnails (enclab.plan.REPORT_FIGURES)
         map="results/rigs/{rig}/{channel}/map.png",
         compliance="results/rigs/{rig}/{channel}/compliance.png",
         heldout_png="results/rigs/{rig}/{channel}/heldout.png",
