@@ -1,4 +1,4 @@
-"""Rule process_chunk: every paper-000 stage of several logs in one job (config chunk_size).
+"""Rule process_chunk: every quantization-error stage of several logs in one job (chunk_size).
 
 Each log's outputs land in results/.chunks/<chunk>/<log_id>/ only if all its stages succeed
 (with the per-log figures for the logs that show them); a failing log is recorded with its

@@ -4,7 +4,7 @@ one job per stage.
 The unit tests drive :func:`enclab.runner.run_chunk` directly. The end-to-end tests read the
 test session's runs of the standard workspace (conftest.py): two good logs, a log with a NaN (fails
 at ingest) and a log too short for the filters (fails after ingest, in the moments/theory
-stages) in one chunk, next to a paper-002 log that keeps its own rules, through the two passes
+stages) in one chunk, next to a low-resolution encoder log that keeps its own rules, through the two passes
 of ``make run``: the bad logs fail alone with their one error line and leave no output, and
 every other output is byte-identical to a run with one job per stage and log.
 """
@@ -225,7 +225,7 @@ def test_check_cutoffs_names_the_time_base_fix_and_the_filter_memory():
 # ----------------------------------------------------------------------------- end to end
 # The test session's runs of the standard workspace (conftest.py): good1, good2, bad (NaN, fails at
 # ingest) and short (fails after ingest, in the moments/theory stages) share one chunk; the
-# paper-002 log keeps its own rules.
+# low-resolution encoder log keeps its own rules.
 
 
 @pytest.mark.slow

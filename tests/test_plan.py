@@ -172,3 +172,9 @@ def test_merged_settings_let_a_log_override_the_config():
     assert plan.merged_settings({"lrde": {"seed": 1, "walkers": 8}}, entry, "lrde") == {"seed": 3, "walkers": 8}
     assert plan.merged_settings({}, {}, "residuals") == {}
 
+
+def test_report_has_one_category_per_analysis():
+    assert set(plan.REPORT_CATEGORIES) == {"propagation", "lrde", "residuals", "rig", "design"}
+    assert {f.category for f in plan.REPORT_FIGURES.values()} == set(plan.REPORT_CATEGORIES.values())
+    assert plan.REPORT_FIGURES["fig6"].category == plan.REPORT_CATEGORIES["propagation"]
+    assert plan.REPORT_FIGURES["rig_map"].category == plan.REPORT_CATEGORIES["rig"]

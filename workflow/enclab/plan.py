@@ -19,7 +19,7 @@ from enclab.residuals.pipeline import residual_pairs
 from enclab.rig.manifest import rig_groups
 
 __all__ = ["stages_of", "first_of_groups", "chunked_ids", "chunk_plan", "select_entries",
-           "make_plan", "Plan", "ReportFigure", "REPORT_FIGURES", "THUMBNAIL_WIDTH",
+           "make_plan", "Plan", "ReportFigure", "REPORT_CATEGORIES", "REPORT_FIGURES", "THUMBNAIL_WIDTH",
            "thumbnail_pattern", "merged_settings"]
 
 
@@ -104,12 +104,19 @@ class ReportFigure(NamedTuple):
     pattern: str
     #: caption file under workflow/report/
     caption: str
-    #: report category
+    #: report category: the analysis that draws the figure (:data:`REPORT_CATEGORIES`)
     category: str
     #: report subcategory (``"{log_id}"``: one per log or rig) or None
     subcategory: str | None
     #: whose figure it is: a key of :meth:`Plan.figure_instances`
     drawn_for: str
+
+
+# The report's categories: one per analysis, named by the question it answers.
+REPORT_CATEGORIES = {"propagation": "Quantization error", "lrde": "Low-resolution encoder",
+                     "residuals": "Residual effects", "rig": "Rig fit", "design": "Design"}
+_QUANTIZATION_ERROR, _LOW_RESOLUTION_ENCODER, _RESIDUAL_EFFECTS, _RIG_FIT, _DESIGN = (
+    REPORT_CATEGORIES[a] for a in ("propagation", "lrde", "residuals", "rig", "design"))
 
 
 def _figure(pattern, caption, category, drawn_for, subcategory="{log_id}"):
@@ -121,41 +128,41 @@ def _figure(pattern, caption, category, drawn_for, subcategory="{log_id}"):
 # A new figure adds a line.
 REPORT_FIGURES = {
     "log_errors": _figure("results/{log_id}/figures/errors.png", "log_errors.rst",
-                          "Per log", "quantization_figure_logs"),
+                          _QUANTIZATION_ERROR, "quantization_figure_logs"),
     "log_comparison": _figure("results/{log_id}/figures/comparison.png", "log_comparison.rst",
-                              "Per log", "quantization_figure_logs"),
+                              _QUANTIZATION_ERROR, "quantization_figure_logs"),
     "lrde_corner": _figure("results/{log_id}/lrde/corner.png", "lrde_corner.rst",
-                           "Paper 002", "lrde_logs"),
+                           _LOW_RESOLUTION_ENCODER, "lrde_logs"),
     "lrde_dwell": _figure("results/{log_id}/lrde/dwell_ppc.png", "lrde_dwell.rst",
-                          "Paper 002", "lrde_logs"),
+                          _LOW_RESOLUTION_ENCODER, "lrde_logs"),
     "lrde_bias_cycles": _figure("results/{log_id}/lrde/bias_cycles.png", "lrde_bias_cycles.rst",
-                                "Paper 002", "lrde_logs"),
+                                _LOW_RESOLUTION_ENCODER, "lrde_logs"),
     "lrde_misfit": _figure("results/{log_id}/lrde/misfit.png", "lrde_misfit.rst",
-                           "Paper 002", "lrde_logs"),
+                           _LOW_RESOLUTION_ENCODER, "lrde_logs"),
     "residual_diagnostics": _figure("results/{log_id}/residuals/{channel}/diagnostics.png",
-                                    "residual_diagnostics.rst", "Residuals",
+                                    "residual_diagnostics.rst", _RESIDUAL_EFFECTS,
                                     "residual_channels"),
     "residual_before_after": _figure("results/{log_id}/residuals/{channel}/before_after.png",
-                                     "residual_before_after.rst", "Residuals",
+                                     "residual_before_after.rst", _RESIDUAL_EFFECTS,
                                      "residual_channels"),
     "residual_covariates": _figure("results/{log_id}/residuals/{channel}/covariates.png",
-                                   "residual_covariates.rst", "Residuals",
+                                   "residual_covariates.rst", _RESIDUAL_EFFECTS,
                                    "residual_channels"),
-    "ratio_figure": _figure("results/figures/ratios.png", "ratio_figure.rst", "Paper 000",
+    "ratio_figure": _figure("results/figures/ratios.png", "ratio_figure.rst", _QUANTIZATION_ERROR,
                             "quantization_batch", subcategory=None),
-    "fig6": _figure("results/figures/fig6_position.png", "fig6.rst", "Paper 000",
+    "fig6": _figure("results/figures/fig6_position.png", "fig6.rst", _QUANTIZATION_ERROR,
                     "paper_figures", subcategory=None),
-    "fig7": _figure("results/figures/fig7_derivatives.png", "fig7.rst", "Paper 000",
+    "fig7": _figure("results/figures/fig7_derivatives.png", "fig7.rst", _QUANTIZATION_ERROR,
                     "paper_figures", subcategory=None),
-    "design_pareto": _figure("results/design/pareto.png", "design_pareto.rst", "Design", "design",
+    "design_pareto": _figure("results/design/pareto.png", "design_pareto.rst", _DESIGN, "design",
                              subcategory=None),
-    "rig_map": _figure("results/rigs/{rig}/{channel}/map.png", "rig_map.rst", "Rigs",
+    "rig_map": _figure("results/rigs/{rig}/{channel}/map.png", "rig_map.rst", _RIG_FIT,
                        "rig_channels"),
     "rig_compliance": _figure("results/rigs/{rig}/{channel}/compliance.png", "rig_compliance.rst",
-                              "Rigs", "rig_channels"),
-    "rig_heldout": _figure("results/rigs/{rig}/{channel}/heldout.png", "rig_heldout.rst", "Rigs",
+                              _RIG_FIT, "rig_channels"),
+    "rig_heldout": _figure("results/rigs/{rig}/{channel}/heldout.png", "rig_heldout.rst", _RIG_FIT,
                            "rig_channels"),
-    "rig_remains": _figure("results/rigs/{rig}/{channel}/remains.png", "rig_remains.rst", "Rigs",
+    "rig_remains": _figure("results/rigs/{rig}/{channel}/remains.png", "rig_remains.rst", _RIG_FIT,
                            "rig_channels"),
 }
 THUMBNAIL_WIDTH = 480

@@ -1,4 +1,5 @@
-# Across logs: batch table, pooled repeat groups, Fig. 6 / Fig. 7 equivalents.
+# Quantization error across logs: batch table, pooled repeat groups, the equivalents of
+# Colonnese & Okamura's Figs. 6 and 7.
 
 
 rule batch_quantization:
@@ -7,7 +8,8 @@ rule batch_quantization:
     output:
         table="results/batch/quantization.csv",
         pooled="results/batch/pooled.csv",
-        ratios=report("results/batch/ratios.csv", category="Batch", caption="../report/ratios.rst"),
+        ratios=report("results/batch/ratios.csv", category=REPORT_CATEGORIES["propagation"],
+                      caption="../report/ratios.rst"),
         violations="results/batch/bound_violations.csv",
     params:
         ci_level=config["moments"]["ci_level"],

@@ -157,6 +157,8 @@ def all_targets():
 # ----------------------------------------------------------------------------- report (batch.smk)
 # The figure registry is enclab.plan.REPORT_FIGURES; Snakemake's report() flags stay here.
 THUMBNAIL_WIDTH = enclab_plan.THUMBNAIL_WIDTH
+# report(category=...) of every rule: one category per analysis
+REPORT_CATEGORIES = enclab_plan.REPORT_CATEGORIES
 
 
 def report_figures():

@@ -1,4 +1,4 @@
-# Rigs: the runs a manifest groups with a `rig` key, fitted together per measured channel
+# Rig fit: the runs a manifest groups with a `rig` key, fitted together per measured channel
 # (docs/residuals.md "Rigs"). No rig in the manifest, no job.
 
 
@@ -7,7 +7,8 @@ rule rig:
         canonical=lambda wc: [f"results/{r['log_id']}/canonical.parquet" for r in RIGS[wc.rig]["runs"]],
     output:
         block="results/rigs/{rig}/{channel}/rig.json",
-        report=report("results/rigs/{rig}/{channel}/report.md", category="Rigs", subcategory="{rig}",
+        report=report("results/rigs/{rig}/{channel}/report.md", category=REPORT_CATEGORIES["rig"],
+                      subcategory="{rig}",
                       caption="../report/rig_report.rst"),
         heldout="results/rigs/{rig}/{channel}/heldout.csv",
         splits="results/rigs/{rig}/{channel}/splits.csv",

@@ -1,5 +1,7 @@
-"""Paper 000 (Colonnese & Okamura): how joint-space quantization error propagates to operational
-space and to the estimated velocity and acceleration, measured and predicted.
+"""Quantization error: how joint-space quantization error propagates to operational space and to
+the estimated velocity and acceleration, measured and predicted (after Colonnese & Okamura,
+"Propagation of joint space quantization error to operational space coordinates and their
+derivatives").
 
 Entry points: the per-log stage functions of :mod:`~enclab.propagation.pipeline` (what the
 workflow's scripts call), built on :mod:`~enclab.propagation.analysis`; the models in

@@ -195,7 +195,7 @@ def quantization_log(entry: Mapping, folder: PathLike, config: Mapping,
     """Every quantization-error stage of one log, ``ingest`` to ``summary``, into ``folder``.
 
     The same calls, in the same order, as the per-stage rules of
-    ``workflow/rules/{ingest,quantization}.smk``; ``folder`` receives the files of
+    ``workflow/rules/{ingest,propagation}.smk``; ``folder`` receives the files of
     :data:`QUANTIZATION_OUTPUTS`, and with ``figures`` those of :data:`FIGURE_OUTPUTS`.
 
     Parameters

@@ -1,4 +1,4 @@
-"""The paper-000 error moments of logs too long for memory, one piece at a time.
+"""The quantization-error moments of logs too long for memory, one piece at a time.
 
 A one-hour, 10 kHz, 7-joint log is 36 million samples; its canonical table alone is 2.3 GB,
 and the in-memory stages (:mod:`enclab.propagation.analysis`) hold many times that. This module computes

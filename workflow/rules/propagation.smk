@@ -1,4 +1,4 @@
-# Paper 000 per log: requantize -> kinematics -> derivatives / moments / theory -> summary.
+# Quantization error per log: requantize -> kinematics -> derivatives / moments / theory -> summary.
 
 
 rule requantize:
