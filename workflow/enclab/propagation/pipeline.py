@@ -18,7 +18,7 @@ from collections.abc import Mapping
 from pathlib import Path
 
 from enclab.core import atomic
-from enclab.core.canonical import read_canonical, write_canonical
+from enclab.core.canonical import Channel, read_canonical, write_canonical
 from enclab.core.errors import EnclabInputError
 from enclab.core.ingest import ingest_to_canonical
 from enclab.propagation import analysis
@@ -183,10 +183,9 @@ def log_figures(inputs: Mapping[str, PathLike], export: list, settle_tol: float,
     atomic.save_figure(plots.error_trace_figure(tr["t"], tr["errors"], title, tr["unit"],
                                                 step=tr["step"]), errors)
     table = analysis.summary_table(summary_block)
-    truth = analysis.truth_channels(meta)[0]
-    native = truth.get("step") or truth.get("native_step")
+    truth = Channel.of(analysis.truth_channels(meta)[0])
     fig = plots.real_log_figure(table, f"{meta['log_id']}: measured vs theory",
-                                native_step=native, step_unit=truth["unit"])
+                                native_step=truth.grid, step_unit=truth.unit)
     atomic.save_figure(fig, comparison)
 
 

@@ -13,7 +13,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from enclab.residuals.pipeline import channel_values
+from enclab.core.canonical import Channel
 from enclab.rig import fit as rg
 from enclab.rig.report import (compliance_figure, condition_table, fit_block, heldout_figure,
                                map_figure, markdown, remains, remains_figure, split_table)
@@ -29,13 +29,13 @@ def run_from_canonical(df, meta: Mapping, measured: str, truth: str, torques: Se
                        conditions: Mapping | None = None, run_id: str | None = None) -> rg.Run:
     """A :class:`~enclab.rig.fit.Run` from a canonical log (:func:`enclab.core.canonical.read_canonical`):
     channel names of the measured and truth angles and of the torques (N m) the compliance uses."""
-    y, step = channel_values(df, meta, measured)
-    theta, truth_step = channel_values(df, meta, truth)
-    if step is None:
+    reading, reference = Channel.named(meta, measured, df), Channel.named(meta, truth, df)
+    if reading.step is None:
         raise ValueError(f"log {meta.get('log_id')!r}: measured channel {measured!r} has no quantization step")
     return rg.Run(run_id=run_id or str(meta.get("log_id")), t=df["t"].to_numpy(np.float64),
-                  truth=theta, measured=y, step=step, truth_step=truth_step,
-                  torques={k: channel_values(df, meta, k)[0] for k in torques},
+                  truth=reference.values, measured=reading.values, step=reading.step,
+                  truth_step=reference.step,
+                  torques={k: Channel.named(meta, k, df).values for k in torques},
                   conditions=dict(conditions or {}))
 
 
