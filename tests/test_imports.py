@@ -12,7 +12,7 @@ import enclab
 ROOT = Path(enclab.__file__).resolve().parent
 ANALYSES = ("propagation", "lrde", "residuals", "rig", "design")
 # analysis -> the analyses it may import. The rig fit builds on the residual effects (the play
-# operator, the motion sign, the calibration and compliance bases, a canonical channel's values);
+# operator, the motion sign, the calibration and compliance bases);
 # design builds on the quantization-error models (filters, Table II, the exact model,
 # kinematics). Neither is imported back.
 BUILDS_ON = {"rig": {"residuals"}, "design": {"propagation"}}
