@@ -1,7 +1,7 @@
-# enclab: logged encoder experiments -> quantization error (paper 000: quantization.smk,
-# enclab.propagation), extreme low-resolution encoder inference (paper 002: lrde.smk,
-# enclab.lrde), residual effects (residuals.smk, rig.smk: enclab.residuals) and design mode
-# (design.smk: enclab.design). This file is wiring only; each stage is a rule file in
+# enclab: logged encoder experiments -> quantization error (propagation.smk, batch.smk:
+# enclab.propagation), low-resolution encoder (lrde.smk: enclab.lrde), residual effects
+# (residuals.smk: enclab.residuals), rig fit (rig.smk: enclab.rig) and design (design.smk:
+# enclab.design). This file is wiring only; each stage is a rule file in
 # workflow/rules/ whose script (scripts/<rule>.py) calls the enclab package (workflow/enclab/).
 
 configfile: "config.yaml"
@@ -9,7 +9,7 @@ configfile: "config.yaml"
 
 include: "workflow/rules/common.smk"
 include: "workflow/rules/ingest.smk"
-include: "workflow/rules/quantization.smk"
+include: "workflow/rules/propagation.smk"
 include: "workflow/rules/batch.smk"
 include: "workflow/rules/lrde.smk"
 include: "workflow/rules/residuals.smk"

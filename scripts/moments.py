@@ -1,11 +1,11 @@
 """Rule moments: empirical error moments over the whole derivative-filter bank."""
-from enclab import stages
+from enclab.propagation import pipeline
 from enclab.runner import run
 
 
 def main(smk):
-    stages.moments(smk.input.requantized, smk.input.kinematics, smk.params.derivatives,
-                   smk.params.moments, smk.output.moments)
+    pipeline.moments(smk.input.requantized, smk.input.kinematics, smk.params.derivatives,
+                     smk.params.moments, smk.output.moments)
 
 
 run(snakemake, main)  # noqa: F821

@@ -1,5 +1,5 @@
-"""Rule paper_figures: paper 000 Fig. 6 (position, per configuration) and Fig. 7 (derivatives
-against the cutoff at the zero configuration) equivalents."""
+"""Rule paper_figures: the equivalents of Colonnese & Okamura's Fig. 6 (position, per
+configuration) and Fig. 7 (derivatives against the cutoff at the zero configuration)."""
 from enclab.core import atomic
 from enclab.propagation import plots
 from enclab.runner import run

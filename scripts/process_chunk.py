@@ -1,4 +1,4 @@
-"""Rule process_chunk: every paper-000 stage of several logs in one job (config chunk_size).
+"""Rule process_chunk: every quantization-error stage of several logs in one job (chunk_size).
 
 Each log's outputs land in results/.chunks/<chunk>/<log_id>/ only if all its stages succeed
 (with the per-log figures for the logs that show them); a failing log is recorded with its
@@ -6,7 +6,7 @@ error line and the others go on (rule publish_log then fails for that log alone)
 chunk's record (token, failures) makes the next run retry a failed log."""
 import logging
 
-from enclab import stages
+from enclab.propagation import pipeline
 from enclab.runner import record_chunk, run, run_chunk
 
 
@@ -16,7 +16,7 @@ def main(smk):
               "moments": p.moments}
     figures = set(p.figures)
     status = run_chunk(
-        p.entries, lambda entry, folder: stages.quantization_log(
+        p.entries, lambda entry, folder: pipeline.quantization_log(
             entry, folder, config, p.data_root, figures=entry["id"] in figures),
         smk.output.staging, data_root=p.data_root)
     record_chunk(p.record, p.retry, status)

@@ -1,8 +1,7 @@
 """Rule rig: the runs of one rig fitted together for one measured channel; shared effects on
 training runs, scored on held-out runs (docs/residuals.md "Rigs")."""
 from enclab.core import atomic, canonical
-from enclab.residuals import rig
-from enclab.residuals.rig_report import report_rig, rule_spec
+from enclab.rig.pipeline import report_rig, rule_spec, run_from_canonical
 from enclab.runner import run
 
 
@@ -11,8 +10,8 @@ def main(smk):
     runs = []
     for path, member in zip(smk.input.canonical, p.runs):
         df, meta = canonical.read_canonical(path)
-        runs.append(rig.run_from_canonical(df, meta, p.pair["measured"], p.pair["truth"],
-                                           list(p.compliance), member["conditions"], member["log_id"]))
+        runs.append(run_from_canonical(df, meta, p.pair["measured"], p.pair["truth"],
+                                       list(p.compliance), member["conditions"], member["log_id"]))
     s = dict(p.settings)
     spec, knots = rule_spec(s, p.compliance)
     # The compliance's form (declared, or the play take-up), the reversal transient and a torque

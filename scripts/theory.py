@@ -1,11 +1,11 @@
 """Rule theory: Table II, the exact model and the trajectory worst case for every row."""
-from enclab import stages
+from enclab.propagation import pipeline
 from enclab.runner import run
 
 
 def main(smk):
-    stages.theory(smk.input.requantized, smk.input.kinematics, smk.params.derivatives,
-                  smk.output.theory)
+    pipeline.theory(smk.input.requantized, smk.input.kinematics, smk.params.derivatives,
+                    smk.output.theory)
 
 
 run(snakemake, main)  # noqa: F821

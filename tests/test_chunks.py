@@ -4,7 +4,7 @@ one job per stage.
 The unit tests drive :func:`enclab.runner.run_chunk` directly. The end-to-end tests read the
 test session's runs of the standard workspace (conftest.py): two good logs, a log with a NaN (fails
 at ingest) and a log too short for the filters (fails after ingest, in the moments/theory
-stages) in one chunk, next to a paper-002 log that keeps its own rules, through the two passes
+stages) in one chunk, next to a low-resolution encoder log that keeps its own rules, through the two passes
 of ``make run``: the bad logs fail alone with their one error line and leave no output, and
 every other output is byte-identical to a run with one job per stage and log.
 """
@@ -18,9 +18,10 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from enclab import runner, stages
+from enclab import runner
 from enclab.core import atomic
 from enclab.core.errors import EnclabInputError, failure_line
+from enclab.propagation import pipeline
 from enclab.propagation.simulate import phantom_protocol_run
 from workspace import (
     copy_workspace,
@@ -198,7 +199,7 @@ def test_quantization_outputs_match_the_rules():
     # publish_log and publish_figures (workflow/rules/chunks.smk) declare these files: keep
     # the lists equal.
     text = (Path(__file__).resolve().parents[1] / "workflow/rules/chunks.smk").read_text()
-    for name, file in {**stages.QUANTIZATION_OUTPUTS, **stages.FIGURE_OUTPUTS}.items():
+    for name, file in {**pipeline.QUANTIZATION_OUTPUTS, **pipeline.FIGURE_OUTPUTS}.items():
         assert f'{name}="results/{{log_id}}/{file}"' in text
 
 
@@ -208,14 +209,14 @@ BANK = {"bank": {"d": [1], "n": [1, 2], "fc_hz": [50], "discretization": ["expon
 
 def test_check_cutoffs_names_the_time_base_fix_and_the_filter_memory():
     meta = {"log_id": "x", "fs_hz": 1000.0, "n_samples": 5000, "warnings": []}
-    stages.check_cutoffs(BANK, meta)  # a 5 s log at 1 kHz suits a 50 Hz filter
+    pipeline.check_cutoffs(BANK, meta)  # a 5 s log at 1 kHz suits a 50 Hz filter
     with pytest.raises(EnclabInputError, match=r"log 'x' has 20 samples, fewer than the longest "
                        r"derivative filter's memory \(\d+ samples\).*higher cutoffs"):
-        stages.check_cutoffs(BANK, {**meta, "n_samples": 20})
+        pipeline.check_cutoffs(BANK, {**meta, "n_samples": 20})
     warning = ("time base: sampled at 1 Hz (median step 1 s), implausibly slow for a moving "
                "encoder (below 10 Hz): is the time column 't' in ms? (set time.unit: ms)")
     with pytest.raises(EnclabInputError) as info:
-        stages.check_cutoffs(BANK, {**meta, "fs_hz": 1.0, "warnings": [warning]})
+        pipeline.check_cutoffs(BANK, {**meta, "fs_hz": 1.0, "warnings": [warning]})
     text = str(info.value)
     assert "Nyquist" in text and text.endswith("is the time column 't' in ms? (set time.unit: ms).")
     assert "\n" not in text
@@ -224,7 +225,7 @@ def test_check_cutoffs_names_the_time_base_fix_and_the_filter_memory():
 # ----------------------------------------------------------------------------- end to end
 # The test session's runs of the standard workspace (conftest.py): good1, good2, bad (NaN, fails at
 # ingest) and short (fails after ingest, in the moments/theory stages) share one chunk; the
-# paper-002 log keeps its own rules.
+# low-resolution encoder log keeps its own rules.
 
 
 @pytest.mark.slow

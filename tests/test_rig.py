@@ -1,4 +1,4 @@
-"""Rig fit (enclab.residuals.rig, enclab.residuals.calibration) on small simulated rigs.
+"""Rig fit (enclab.rig, with enclab.residuals.calibration) on small simulated rigs.
 
 The simulated rig (``rig.simulate_rig``) has a known scale, calibration map, softening
 compliance against two torques, and per-run play widths and latencies; the truth is read on the
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from enclab.residuals import calibration as cal
-from enclab.residuals import rig
+from enclab.rig import fit as rig
 
 STEP = 2 * math.pi / 8192
 TRUTH_STEP = 2 * math.pi / 146860
@@ -281,11 +281,11 @@ def test_shared_latency_recovered(sim_rig):
 
 
 def test_rig_report_tables_figures_and_words(sim_rig):
-    from enclab.residuals import rig_report
+    from enclab.rig import pipeline as rig_pipeline
 
     runs = [sim_rig[i] for i in (0, 1, 3, 4)]
     spec = rig.RigSpec(spacing=0.1, compliance=SPEC_COMP, latency="shared", transient=0.01)
-    out = rig_report.report_rig("sim", "theta_out", runs, spec,
+    out = rig_pipeline.report_rig("sim", "theta_out", runs, spec,
                                 [{"name": "freq", "by": "frequency_hz", "train": [0.5], "test": [0.75]}],
                                 [0.3, 0.05], truth_counts_per_rev=146860)
     block = out["block"]
@@ -305,7 +305,7 @@ def test_rig_report_tables_figures_and_words(sim_rig):
 
 
 def test_remains_separates_repeatable_from_random_motion_in_the_play(sim_rig):
-    from enclab.residuals.rig_report import remains
+    from enclab.rig.report import remains
 
     spec = rig.RigSpec()
     rng = np.random.default_rng(0)
@@ -404,11 +404,11 @@ def test_takeup_variants_scale_with_the_torque_and_keep_the_declared_form_first(
 
 
 def test_rig_report_shows_the_chosen_takeup(takeup_rig):
-    from enclab.residuals import rig_report
+    from enclab.rig import pipeline as rig_pipeline
 
     runs = [takeup_rig[i] for i in (0, 1, 2, 4, 5)]
     spec = rig.RigSpec(spacing=None, compliance=SPEC_COMP)
-    out = rig_report.report_rig("sim", "theta_out", runs, spec,
+    out = rig_pipeline.report_rig("sim", "theta_out", runs, spec,
                                 [{"name": "load", "by": "load", "train": [0.0, 0.3], "test": [0.6]}],
                                 None, variants="takeup")
     fold = out["block"]["folds"][0]
@@ -466,12 +466,12 @@ def test_input_side_map_recovered():
 
 
 def test_rig_report_shows_the_input_side_map():
-    from enclab.residuals import rig_report
+    from enclab.rig import pipeline as rig_pipeline
 
     runs = rig.simulate_rig(np.random.default_rng(4), CONDS[:4], step=STEP, truth_step=TRUTH_STEP,
                             play_width=0.02, gear_ratio=35.0, input_map_fn=input_error)
     spec = rig.RigSpec(spacing=0.2, gear_ratio=35.0, input_harmonics=2)
-    out = rig_report.report_rig("sim", "theta_out", runs, spec,
+    out = rig_pipeline.report_rig("sim", "theta_out", runs, spec,
                                 [{"name": "f", "by": "frequency_hz", "train": [0.5], "test": [0.75]}], None)
     block = out["block"]["final"]["input_map"]
     assert len(block["curve"]) == 101 and block["gear_ratio"] == 35.0
@@ -536,12 +536,12 @@ def test_declared_map_term_becomes_a_torque_map_beside_the_linear_term():
 
 
 def test_rig_report_shows_the_torque_map(takeup_rig):
-    from enclab.residuals import rig_report
+    from enclab.rig import pipeline as rig_pipeline
 
     runs = [takeup_rig[i] for i in (0, 1, 2, 4, 5)]
     spec = rig.RigSpec(spacing=None, **rig.declared_compliance(
         {"torque_back": ["linear", "map"], "torque_front": ["linear"]}, 4))
-    out = rig_report.report_rig("sim", "theta_out", runs, spec,
+    out = rig_pipeline.report_rig("sim", "theta_out", runs, spec,
                                 [{"name": "load", "by": "load", "train": [0.0, 0.3], "test": [0.6]}],
                                 None, variants="takeup", torque_knots=[4, 16])
     fold = out["block"]["folds"][0]
@@ -573,9 +573,9 @@ def test_choose_variant_leaves_out_a_torque_channel_the_runs_do_not_support(fron
     assert ("torque_front" in chosen.compliance) is kept
     assert "torque_back" in chosen.compliance
     if not kept:
-        from enclab.residuals import rig_report
+        from enclab.rig import pipeline as rig_pipeline
 
-        out = rig_report.report_rig("sim", "theta_out", runs, spec,
+        out = rig_pipeline.report_rig("sim", "theta_out", runs, spec,
                                     [{"name": "load", "by": "load", "train": [0.0, 0.3], "test": [0.6]}],
                                     None, variants="takeup")
         assert "torque_front left out" in out["markdown"]

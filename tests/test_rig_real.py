@@ -19,8 +19,9 @@ if not REAL.is_dir():
     pytest.skip(f"real logs not available ({REAL} is absent)", allow_module_level=True)
 
 from enclab.core import ingest, readers  # noqa: E402
-from enclab.residuals import rig  # noqa: E402
-from enclab.residuals.rig_manifest import rig_groups  # noqa: E402
+from enclab.rig import fit as rig  # noqa: E402
+from enclab.rig.manifest import rig_groups  # noqa: E402
+from enclab.rig.pipeline import run_from_canonical  # noqa: E402
 
 pytestmark = pytest.mark.shared
 
@@ -36,8 +37,8 @@ def test_mrdlab_rig_held_out_run():
     for member in group["runs"]:
         if member["log_id"] in wanted:
             df, meta = ingest.ingest_log(by_id[member["log_id"]], REPO / data_root, devices)
-            runs[member["log_id"]] = rig.run_from_canonical(df, meta, "theta_cui", "theta_motor", ["torque_back"],
-                                                            member["conditions"], member["log_id"])
+            runs[member["log_id"]] = run_from_canonical(df, meta, "theta_cui", "theta_motor", ["torque_back"],
+                                                        member["conditions"], member["log_id"])
     spec = rig.RigSpec(spacing=0.05, compliance={"torque_back": ["linear"]}, latency="shared")
     fit = rig.fit_rig([runs[k] for k, v in wanted.items() if v == "train"], spec)
     test = runs["mrdlab_20"]
@@ -77,5 +78,5 @@ def test_second_run_set_is_a_rig_that_extrapolates_in_load():
     entry = by_entry["mrdlab_l4_49"]
     df, meta = ingest.ingest_log(entry, REPO / data_root, devices)
     assert 19_900 < len(df) < 20_100
-    run = rig.run_from_canonical(df, meta, "theta_cui", "theta_motor", ["torque_back"])
+    run = run_from_canonical(df, meta, "theta_cui", "theta_motor", ["torque_back"])
     assert 0.45 < np.ptp(run.truth) / 2 < 0.55  # a 30 deg (0.52 rad) sine

@@ -12,8 +12,8 @@ import pandas as pd
 import pytest
 import yaml
 
-from enclab.residuals import rig
-from enclab.residuals.rig_manifest import rig_groups
+from enclab.rig import fit as rig
+from enclab.rig.manifest import rig_groups
 from workspace import ROOT, snakemake_command
 
 STEP = 2 * np.pi / 8192

@@ -5,15 +5,19 @@ Subpackages (each with its entry points in its docstring):
 
 - :mod:`enclab.core`         shared: errors, manifest, readers, ingest, canonical log, atomic
   writes, the quantizer; imports no analysis
-- :mod:`enclab.propagation`  paper 000 (Colonnese & Okamura): quantization error of positions,
-  velocities and accelerations, measured, predicted (Table II, exact model) and bounded
-- :mod:`enclab.lrde`         paper 002 (Zhang & Gao): extreme low-resolution encoder, offset and
-  bias from dwell patterns (emcee)
-- :mod:`enclab.residuals`    what the exact model misses on a measured channel, and which effect
-  explains it
-- :mod:`enclab.design`       encoder resolution and derivative filter for an error budget
+- :mod:`enclab.propagation`  quantization error: of positions, velocities and accelerations,
+  measured, predicted (Colonnese & Okamura's Table II, the exact model) and bounded
+- :mod:`enclab.lrde`         low-resolution encoder: offset and bias of an extreme
+  low-resolution encoder from dwell patterns (emcee; after Zhang & Gao)
+- :mod:`enclab.residuals`    residual effects: what the exact model misses on a measured
+  channel, and which effect explains it
+- :mod:`enclab.rig`          rig fit: several runs of one rig fitted together, the effects they
+  share proven on held-out runs (builds on :mod:`enclab.residuals`)
+- :mod:`enclab.design`       design: encoder resolution and derivative filter for an error budget
+  (builds on :mod:`enclab.propagation`)
 
-Workflow glue: :mod:`enclab.stages` (per-log stages), :mod:`enclab.runner` (script runner),
+Workflow glue: :mod:`enclab.plan` (what a run does: logs, chunks, targets, report figures),
+:mod:`enclab.log_summary` (a log's summary.json), :mod:`enclab.runner` (script runner),
 :mod:`enclab.report` (run summary), :mod:`enclab.progress` (progress lines), :mod:`enclab.cli`
 (the ``enclab`` command).
 """

@@ -1,4 +1,5 @@
-# Across logs: batch table, pooled repeat groups, Fig. 6 / Fig. 7 equivalents.
+# Quantization error across logs: batch table, pooled repeat groups, the equivalents of
+# Colonnese & Okamura's Figs. 6 and 7.
 
 
 rule batch_quantization:
@@ -7,7 +8,8 @@ rule batch_quantization:
     output:
         table="results/batch/quantization.csv",
         pooled="results/batch/pooled.csv",
-        ratios=report("results/batch/ratios.csv", category="Batch", caption="../report/ratios.rst"),
+        ratios=report("results/batch/ratios.csv", category=REPORT_CATEGORIES["propagation"],
+                      caption="../report/ratios.rst"),
         violations="results/batch/bound_violations.csv",
     params:
         ci_level=config["moments"]["ci_level"],
@@ -36,7 +38,7 @@ rule ratio_figure:
 
 
 # Requested only when the manifest holds the configured Fig. 6 level and Fig. 7 group
-# (see paper_figures_apply in common.smk).
+# (enclab.plan.Plan.paper_figures).
 rule paper_figures:
     input:
         pooled="results/batch/pooled.csv",
@@ -55,7 +57,7 @@ rule paper_figures:
 
 
 # ----------------------------------------------------------------------------- run summary, report
-# The figures' thumbnails and the run summary (helpers in common.smk: REPORT_FIGURES).
+# The figures' thumbnails and the run summary (enclab.plan: REPORT_FIGURES, Plan.report_figures).
 
 
 rule report_thumbnails:

@@ -1,8 +1,8 @@
-# Chunked mode, the default (config chunk_size = K > 0; common.smk cuts the chunks; 0 = one job
-# per stage and log). A Snakemake `script:` job starts a new Python and imports the package:
+# Chunked mode, the default (config chunk_size = K > 0; enclab.plan.chunk_plan cuts the chunks;
+# 0 = one job per stage and log). A Snakemake `script:` job starts a new Python and imports the package:
 # with one job per stage and log that start-up costs more than the work of a short log. Here one
-# job runs every paper-000 stage of K logs (scripts/process_chunk.py, the same enclab.stages
-# calls as the per-stage rules), and draws the per-log figures of the logs that show them,
+# job runs every quantization-error stage of K logs (scripts/process_chunk.py, the same
+# enclab.propagation.pipeline calls as the per-stage rules), and draws the per-log figures of the logs that show them,
 # staging each log's outputs; then one shell job per log hard-links them into results/<log_id>/
 # or fails with that log's error line, so a bad log still fails alone, leaves no output, and the
 # rest of the workflow (batch tables, `make run`'s second pass) sees the usual per-log files.
@@ -46,11 +46,11 @@ rule process_chunk:
 
 # A shell job, not a Python script or `run:` block: Snakemake starts a Python (a whole
 # Snakemake, for `run:`) per such job, which is the overhead this mode removes. It only links
-# files, with two `ln` calls: 200 runs in bash of the former loop over the outputs (basename,
-# a temporary name, mv) took ~30 ms CPU per log, this ~4 ms. No temporary name is needed:
-# Snakemake removes a job's outputs before it runs and after it fails, and marks them
-# incomplete while it runs. The staged log is the log's whole log (every stage), kept as its
-# rule log.
+# files: one `ln` links the staged log as the rule's log, a second hard-links every staged
+# output into results/<log_id>/ in one call (about 4 ms CPU per log). The outputs are linked
+# under their final names, with no temporary name: Snakemake removes a job's outputs before it
+# runs and after it fails, and marks them incomplete while it runs. The staged log is the
+# log's whole log (every stage), kept as its rule log.
 rule publish_log:
     input:
         staging=lambda wc: f"results/.chunks/{CHUNK_OF[wc.log_id]}",

@@ -6,9 +6,9 @@ rule design:
     input:
         unpack(design_inputs),
     output:
-        block=report("results/design/design.json", category="Design",
+        block=report("results/design/design.json", category=REPORT_CATEGORIES["design"],
                      caption="../report/design_block.rst"),
-        table=report("results/design/designs.csv", category="Design",
+        table=report("results/design/designs.csv", category=REPORT_CATEGORIES["design"],
                      caption="../report/design_table.rst"),
         figure="results/design/pareto.png",
     params:

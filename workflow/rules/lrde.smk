@@ -1,4 +1,5 @@
-# Paper 002 per log: dwell patterns and the emcee fit of stroke, bias and offset -> report.
+# Low-resolution encoder per log: dwell patterns and the emcee fit of stroke, bias and offset
+# (after Zhang & Gao) -> report.
 
 
 rule lrde_fit:
@@ -9,9 +10,9 @@ rule lrde_fit:
     output:
         block="results/{log_id}/lrde/lrde.json",
         cycles="results/{log_id}/lrde/cycles.csv",
-        report=report("results/{log_id}/lrde/report.md", category="Paper 002",
+        report=report("results/{log_id}/lrde/report.md", category=REPORT_CATEGORIES["lrde"],
                       subcategory="{log_id}", caption="../report/lrde_report.rst"),
-        # figures: in the report as thumbnails (REPORT_FIGURES, batch.smk)
+        # figures: in the report as thumbnails (enclab.plan.REPORT_FIGURES)
         corner="results/{log_id}/lrde/corner.png",
         dwell="results/{log_id}/lrde/dwell_ppc.png",
         bias_cycles="results/{log_id}/lrde/bias_cycles.png",
@@ -36,7 +37,8 @@ rule batch_lrde:
     input:
         summaries=expand("results/{log_id}/summary.json", log_id=LRDE_IDS),
     output:
-        table=report("results/batch/lrde.csv", category="Paper 002", caption="../report/lrde_batch.rst"),
+        table=report("results/batch/lrde.csv", category=REPORT_CATEGORIES["lrde"],
+                     caption="../report/lrde_batch.rst"),
     params:
         code=CODE_DIGEST,
     log:

@@ -1,4 +1,4 @@
-# Residual stage per measured channel (every measured channel with a truth channel on the same
+# Residual effects per measured channel (every measured channel with a truth channel on the same
 # joint): residual against the exact quantizer model, diagnostics, effect selection, before/after,
 # and the angle-error map as a lookup table.
 
@@ -8,9 +8,10 @@ rule residuals:
         canonical="results/{log_id}/canonical.parquet",
     output:
         block="results/{log_id}/residuals/{channel}/residuals.json",
-        table=report("results/{log_id}/residuals/{channel}/before_after.csv", category="Residuals",
+        table=report("results/{log_id}/residuals/{channel}/before_after.csv",
+                     category=REPORT_CATEGORIES["residuals"],
                      subcategory="{log_id}", caption="../report/residual_table.rst"),
-        # figures: in the report as thumbnails (REPORT_FIGURES, batch.smk)
+        # figures: in the report as thumbnails (enclab.plan.REPORT_FIGURES)
         diagnostics="results/{log_id}/residuals/{channel}/diagnostics.png",
         before_after="results/{log_id}/residuals/{channel}/before_after.png",
         covariates="results/{log_id}/residuals/{channel}/covariates.png",
@@ -37,7 +38,7 @@ rule batch_residuals:
     input:
         summaries=expand("results/{log_id}/summary.json", log_id=RESIDUAL_IDS),
     output:
-        table=report("results/batch/residuals.csv", category="Residuals",
+        table=report("results/batch/residuals.csv", category=REPORT_CATEGORIES["residuals"],
                      caption="../report/residual_batch.rst"),
     params:
         code=CODE_DIGEST,

@@ -1,4 +1,4 @@
-# Rigs: the runs a manifest groups with a `rig` key, fitted together per measured channel
+# Rig fit: the runs a manifest groups with a `rig` key, fitted together per measured channel
 # (docs/residuals.md "Rigs"). No rig in the manifest, no job.
 
 
@@ -7,12 +7,13 @@ rule rig:
         canonical=lambda wc: [f"results/{r['log_id']}/canonical.parquet" for r in RIGS[wc.rig]["runs"]],
     output:
         block="results/rigs/{rig}/{channel}/rig.json",
-        report=report("results/rigs/{rig}/{channel}/report.md", category="Rigs", subcategory="{rig}",
+        report=report("results/rigs/{rig}/{channel}/report.md", category=REPORT_CATEGORIES["rig"],
+                      subcategory="{rig}",
                       caption="../report/rig_report.rst"),
         heldout="results/rigs/{rig}/{channel}/heldout.csv",
         splits="results/rigs/{rig}/{channel}/splits.csv",
         conditions="results/rigs/{rig}/{channel}/conditions.csv",
-        # figures: in the report as thumbnails (REPORT_FIGURES, common.smk)
+        # figures: in the report as thumbnails (enclab.plan.REPORT_FIGURES)
         map="results/rigs/{rig}/{channel}/map.png",
         compliance="results/rigs/{rig}/{channel}/compliance.png",
         heldout_png="results/rigs/{rig}/{channel}/heldout.png",

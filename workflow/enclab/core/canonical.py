@@ -1,12 +1,16 @@
 """The canonical log: Parquet with the log's metadata JSON under the schema key ``b"enclab"``,
-read whole or streamed in row batches, and written from chunks for logs larger than memory.
+read whole or streamed in row batches, and written from chunks for logs larger than memory;
+and :class:`Channel`, one channel of it in SI with its step, grid and unit.
 """
 from __future__ import annotations
 
 import json
 import os
+from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Iterator
 
+import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -20,6 +24,7 @@ from enclab.core.atomic import (
 from enclab.core.errors import EnclabInputError
 
 __all__ = [
+    "Channel",
     "iter_canonical",
     "read_canonical",
     "write_canonical",
@@ -152,3 +157,95 @@ def write_canonical_chunks(chunks, meta: dict, path: str | os.PathLike) -> int:
         if writer is None:
             raise ValueError(f"no chunks to write to {str(path)!r}")
     return rows
+
+
+# --------------------------------------------------------------------------- channels
+
+
+@dataclass(frozen=True)
+class Channel:
+    """One channel of a canonical log: its metadata, typed, and its stored column.
+
+    A quantized channel is stored as int64 ``counts`` with an SI ``step`` (never as re-rounded
+    floats); any other channel as SI floats. :attr:`values` is the channel in SI either way.
+    Build one with :meth:`of` (a channel's metadata entry and a table holding its column) or
+    :meth:`named` (a log's metadata and a channel name).
+
+    Attributes
+    ----------
+    name : str
+    unit : str
+        SI unit of :attr:`values` and of the steps (``"rad"`` or ``"m"``).
+    role : str or None
+        ``"truth"``, ``"measured"`` or ``"aux"``.
+    joint : int or None
+    step : float or None
+        Quantization step (SI) of a channel stored as counts; None for a float channel.
+    native_step : float or None
+        The grid a channel's values sit on (declared or detected at ingest; equal to ``step``
+        for a counts channel), None when unknown.
+    column : ndarray or None
+        The stored column (int64 counts or float64 SI), None for metadata alone.
+    """
+
+    name: str
+    unit: str
+    role: str | None = None
+    joint: int | None = None
+    step: float | None = None
+    native_step: float | None = None
+    column: np.ndarray | None = None
+
+    @classmethod
+    def of(cls, chan: Mapping, df: pd.DataFrame | None = None, *,
+           column: np.ndarray | None = None) -> Channel:
+        """The channel of a metadata entry (``meta["channels"][k]``), with its column: of the
+        table ``df`` or the stored ``column`` itself, when given."""
+        counts = chan["storage"] == "counts"
+        native = chan.get("native_step")
+        if df is not None:
+            column = df[chan["name"]].to_numpy()
+        return cls(name=chan["name"], unit=chan.get("unit"), role=chan.get("role"),
+                   joint=chan.get("joint"), step=float(chan["step"]) if counts else None,
+                   native_step=None if native is None else float(native), column=column)
+
+    @classmethod
+    def named(cls, meta: Mapping, name: str, df: pd.DataFrame | None = None) -> Channel:
+        """Channel ``name`` of a log's metadata, with its column of ``df`` when given.
+
+        Raises
+        ------
+        ValueError
+            When the log has no such channel (the message lists the log's channels).
+        """
+        chan = next((c for c in meta["channels"] if c["name"] == name), None)
+        if chan is None:
+            raise ValueError(f"log {meta.get('log_id')!r} has no channel {name!r}; channels "
+                             f"{[c['name'] for c in meta['channels']]}")
+        return cls.of(chan, df)
+
+    @property
+    def is_counts(self) -> bool:
+        """Whether the channel is stored as integer counts (it then has a ``step``)."""
+        return self.step is not None
+
+    @property
+    def grid(self) -> float | None:
+        """The grid the values sit on: the step of a counts channel, else the native step."""
+        return self.step if self.is_counts else self.native_step
+
+    def _stored(self) -> np.ndarray:
+        if self.column is None:
+            raise ValueError(f"channel {self.name!r} was built without its column")
+        return self.column
+
+    @property
+    def counts(self) -> np.ndarray | None:
+        """The stored integer counts of a counts channel, None for a float channel."""
+        return self._stored() if self.is_counts else None
+
+    @property
+    def values(self) -> np.ndarray:
+        """The channel in SI (:attr:`unit`), float64: ``counts * step`` or the stored floats."""
+        column = self._stored().astype(np.float64)
+        return column * self.step if self.is_counts else column

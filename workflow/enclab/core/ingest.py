@@ -15,6 +15,7 @@ References
 from __future__ import annotations
 
 import copy
+import logging
 import math
 import os
 from pathlib import Path
@@ -22,12 +23,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from enclab.core.canonical import write_canonical
 from enclab.core.errors import EnclabInputError
 from enclab.core.manifest import channel_axis, detect_grid_enabled
 from enclab.core.readers import file_sha256, read_raw, require_finite
 
 __all__ = [
     "ingest_log",
+    "ingest_to_canonical",
     "GRID_TOLERANCE",
     "RATE_TOLERANCE",
     "SLOW_RATE_HZ",
@@ -684,3 +687,16 @@ def ingest_log(entry: dict, data_root: str | os.PathLike, devices: dict) -> tupl
     df, meta = canonicalize(raw, entry, devices)
     meta["source"]["sha256"] = file_sha256(Path(data_root) / entry["file"])
     return df, meta
+
+
+_LOG = logging.getLogger("enclab.ingest")
+
+
+def ingest_to_canonical(entry: dict, data_root: str | os.PathLike, devices: dict,
+                        canonical: str | os.PathLike) -> None:
+    """One manifest entry -> the canonical Parquet log (:func:`ingest_log`), the file-to-file
+    step of rule ``ingest`` and of the chunked mode; the log's warnings are logged too."""
+    df, meta = ingest_log(entry, data_root, devices)
+    for line in meta.get("warnings") or []:
+        _LOG.warning("[%s] %s", meta["log_id"], line)
+    write_canonical(df, meta, canonical)

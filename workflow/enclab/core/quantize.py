@@ -1,6 +1,7 @@
 """Encoder quantizer on integer counts, exact re-quantization, and labels for steps.
 
-Quantizer (paper 000 with rounding, paper 002 with an offset)::
+Quantizer (rounding for the quantization-error analysis, an offset for the low-resolution
+encoder)::
 
     counts = floor(theta / step + offset_frac),   reading = step * counts
 
@@ -16,11 +17,10 @@ float readings again, which is not idempotent.
 References
 ----------
 .. [1] N. Colonnese and A. M. Okamura, "Propagation of joint space quantization error to
-   operational space coordinates and their derivatives", Section II (paper 000 in
-   ``papers/``).
+   operational space coordinates and their derivatives", Section II.
 .. [2] Z. Zhang and Q. Gao, "Characterization of extreme low-resolution digital encoder
-   for control system with sinusoidal reference signal" (paper 002 in ``papers/``): the
-   encoder's initial position (offset angle).
+   for control system with sinusoidal reference signal": the encoder's initial position
+   (offset angle).
 """
 from __future__ import annotations
 

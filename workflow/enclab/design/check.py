@@ -1,6 +1,6 @@
 """Proof by simulation: a design on random trajectories of its workspace, against the budget.
 
-Paper 000's Section IV protocol, generalised: each trajectory moves every joint as
+The Section IV protocol of Colonnese & Okamura, generalised: each trajectory moves every joint as
 ``c_i + A_i sin(2 pi f_i t + phi_i)`` with the centre ``c`` uniform over the workspace's centre
 box, ``f_i`` uniform in the motion's band and ``phi_i`` uniform; a logged workspace is replayed
 with a uniform sub-step shift per joint instead. The truth is continuous; the encoder reads

@@ -1,6 +1,6 @@
 """Low-resolution encoder design: how many cycles, or what sample rate, for a requested precision.
 
-Paper 002's encoder reads a sinusoid with a stroke of a few steps; the Bayesian fit
+Zhang & Gao's encoder reads a sinusoid with a stroke of a few steps; the Bayesian fit
 (:mod:`enclab.lrde.fit`) recovers the stroke ``A12`` and the bias deviation ``E_b`` from the
 dwell pattern. Their posterior RMSE falls with the number of cycles in the log and with the
 number of samples per motion period (the dwell ends are located to a fraction of a sample

@@ -51,7 +51,7 @@ class Candidate:
 
 def candidates(problem: DesignProblem) -> list[Candidate]:
     """Position (order 0, when budgeted) and every filter of a budgeted derivative order in
-    every architecture (the joint-space architecture for velocities only, as paper 000)."""
+    every architecture (the joint-space architecture for velocities only, as Colonnese & Okamura)."""
     orders = problem.orders
     out = [Candidate(None, None)] if 0 in orders else []
     for f in problem.filters:

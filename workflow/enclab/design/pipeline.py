@@ -12,6 +12,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
+from enclab.core.canonical import Channel
 from enclab.design import check as chk
 from enclab.design.lrde import lrde_design
 from enclab.design.plots import pareto_figure
@@ -26,11 +27,7 @@ _DEFAULT_CHECK = {"trajectories": 200, "duration_s": 5.0, "seed": 20261202}
 
 def truth_trajectory(df: pd.DataFrame, meta: Mapping) -> np.ndarray:
     """(N, n) truth angles (SI) of a canonical log, joints in order, for a logged workspace."""
-    cols = []
-    for chan in truth_channels(meta):
-        values = df[chan["name"]].to_numpy().astype(np.float64)
-        cols.append(values * float(chan["step"]) if chan["storage"] == "counts" else values)
-    return np.column_stack(cols)
+    return np.column_stack([Channel.of(chan, df).values for chan in truth_channels(meta)])
 
 
 def design_table(result: SearchResult) -> pd.DataFrame:

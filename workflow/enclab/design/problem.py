@@ -74,7 +74,7 @@ class BudgetItem:
 
 @dataclass(frozen=True)
 class SinusoidMotion:
-    """Paper 000's Section IV protocol about a centre: ``theta_i = c_i + A_i sin(2 pi f_i t + phi_i)``.
+    """The Section IV protocol of Colonnese & Okamura about a centre: ``theta_i = c_i + A_i sin(2 pi f_i t + phi_i)``.
 
     ``A_i`` is fixed per joint, ``f_i`` anywhere in ``[f_lo, f_hi]``, ``phi_i`` anything; the
     joints move at distinct frequencies (independent errors). The design model takes the worst

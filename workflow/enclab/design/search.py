@@ -8,7 +8,7 @@ workspace is computed for every operational output, twice:
   default, see :mod:`enclab.design.model`) and the worst case over the trajectory region
   (Taylor bound with the Hessian and the third-derivative bound);
 * **Table II**: PQN (white error, ``||h||_2``) at the grid centres and the centre-configuration
-  worst case ``1/2 |J| step ||h||_1`` -- what a design from paper 000's table alone would use.
+  worst case ``1/2 |J| step ||h||_1`` -- what a design from Colonnese & Okamura's Table II alone would use.
 
 A design is one step per joint plus one estimator per budgeted derivative order; it meets the
 budget when every item holds on every named axis. Designs are ranked by cost (the sum of the

@@ -1,10 +1,13 @@
-"""Paper 000 (Colonnese & Okamura): how joint-space quantization error propagates to operational
-space and to the estimated velocity and acceleration, measured and predicted.
+"""Quantization error: how joint-space quantization error propagates to operational space and to
+the estimated velocity and acceleration, measured and predicted (after Colonnese & Okamura,
+"Propagation of joint space quantization error to operational space coordinates and their
+derivatives").
 
-Entry points: the per-log stage functions of :mod:`enclab.stages` (what the workflow's scripts
-call), built on :mod:`~enclab.propagation.analysis`; the models in
+Entry points: the per-log stage functions of :mod:`~enclab.propagation.pipeline` (what the
+workflow's scripts call), built on :mod:`~enclab.propagation.analysis`; the models in
 :mod:`~enclab.propagation.theory`.
 
+- :mod:`enclab.propagation.pipeline`    the per-log stages, file to file, and the chunked mode
 - :mod:`enclab.propagation.theory`      Table II (worst case, PQN), the exact non-white model,
   the trajectory worst-case bound
 - :mod:`enclab.propagation.filters`     derivative estimators of Fig. 5 and their norms
@@ -17,5 +20,5 @@ call), built on :mod:`~enclab.propagation.analysis`; the models in
 - :mod:`enclab.propagation.plots`       figures (Figs. 6-7, per-log errors, ratios)
 """
 
-__all__ = ["theory", "filters", "kinematics", "moments", "analysis", "batch", "stream", "simulate",
-           "plots"]
+__all__ = ["pipeline", "theory", "filters", "kinematics", "moments", "analysis", "batch", "stream",
+           "simulate", "plots"]

@@ -36,6 +36,7 @@ import numpy as np
 import pandas as pd
 
 from enclab.core import quantize as qz
+from enclab.core.canonical import Channel
 from enclab.core.errors import EnclabInputError
 from enclab.propagation import filters as flt
 from enclab.propagation import moments as mom
@@ -93,18 +94,12 @@ def truth_channels(meta: Mapping) -> list[dict]:
 
 
 def _truth_values(df: pd.DataFrame, chan: Mapping) -> np.ndarray:
-    col = df[chan["name"]].to_numpy()
-    if chan["storage"] == "counts":
-        return col.astype(np.float64) * float(chan["step"])
-    return col.astype(np.float64)
+    return Channel.of(chan, df).values
 
 
 def _truth_step(chan: Mapping) -> float | None:
     """The grid of a truth channel (counts step or detected/declared native step)."""
-    if chan["storage"] == "counts":
-        return float(chan["step"])
-    native = chan.get("native_step")
-    return None if native is None else float(native)
+    return Channel.of(chan).grid
 
 
 def plan_levels(meta: Mapping, settings: Mapping) -> list[dict]:
@@ -199,10 +194,7 @@ def level_counts(column: np.ndarray, chan: Mapping, joint: Mapping,
     """One joint's counts at one level (an entry of ``plan_levels(...)[k]["joints"]``) from
     the truth channel's stored column (counts or SI floats, as ``chan["storage"]`` says)."""
     if joint["ratio"] is None:
-        values = column.astype(np.float64)
-        if chan["storage"] == "counts":
-            values = values * float(chan["step"])
-        return qz.quantize(values, joint["step"], offset_frac)
+        return qz.quantize(Channel.of(chan, column=column).values, joint["step"], offset_frac)
     fine = column
     if chan["storage"] != "counts":
         fine = np.rint(fine / joint["truth_step"]).astype(np.int64)

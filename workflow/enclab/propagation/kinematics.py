@@ -15,7 +15,7 @@ with gaps can be processed in one call.
 References
 ----------
 .. [1] N. Colonnese and A. M. Okamura, "Propagation of joint space quantization error to
-   operational space coordinates and their derivatives", paper 000 in ``papers/``.
+   operational space coordinates and their derivatives".
 .. [2] M. C. Cavusoglu, D. Feygin, and F. Tendick, "A critical study of the mechanical and
    electrical properties of the PHANToM haptic interface and improvements for high
    performance control," Presence, 11(5):555-568, 2002.
@@ -192,7 +192,7 @@ class PhantomPremium15(Device):
 
     References
     ----------
-    .. [1] Colonnese & Okamura, paper 000, Section IV and Fig. 4.
+    .. [1] Colonnese & Okamura, Section IV and Fig. 4.
     .. [2] Cavusoglu, Feygin and Tendick, Presence 11(5), 2002.
     """
 

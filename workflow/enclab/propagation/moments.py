@@ -15,7 +15,9 @@ are provided:
 References
 ----------
 .. [1] G. S. Fishman, *Discrete-Event Simulation*, Springer, 2001 (the method of batch means).
-.. [2] N. Colonnese and A. M. Okamura, paper 000, Section IV (empirical error statistics).
+.. [2] N. Colonnese and A. M. Okamura, "Propagation of joint space quantization error to
+   operational space coordinates and their derivatives", Section IV (empirical error
+   statistics).
 """
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Simulated lab logs of the Colonnese & Okamura Section IV protocol (Phantom Premium 1.5).
+"""Simulated lab logs of the Phantom Premium 1.5 protocol of Colonnese & Okamura, Section IV.
 
 There is no public Phantom log, so the experiment is simulated: the device oscillates about
 a centre configuration, each joint with amplitude 3 deg and its own frequency within 0.1 Hz
@@ -10,8 +10,7 @@ from the truth counts.
 References
 ----------
 .. [1] N. Colonnese and A. M. Okamura, "Propagation of joint space quantization error to
-   operational space coordinates and their derivatives", paper 000 in ``papers/``,
-   Section IV-A (protocol) and Fig. 6 (error vs configuration).
+   operational space coordinates and their derivatives", Section IV-A (protocol) and Fig. 6 (error vs configuration).
 """
 from __future__ import annotations
 
@@ -161,7 +160,7 @@ def phantom_protocol_run(
 
     References
     ----------
-    .. [1] Colonnese & Okamura, paper 000, Section IV-A.
+    .. [1] Colonnese & Okamura, Section IV-A.
     """
     centre = _vector("centre_rad", centre_rad, len(PHANTOM_JOINTS))
     duration_s = _positive("duration_s", duration_s)

@@ -1,4 +1,4 @@
-"""The paper-000 error moments of logs too long for memory, one piece at a time.
+"""The quantization-error moments of logs too long for memory, one piece at a time.
 
 A one-hour, 10 kHz, 7-joint log is 36 million samples; its canonical table alone is 2.3 GB,
 and the in-memory stages (:mod:`enclab.propagation.analysis`) hold many times that. This module computes
@@ -59,6 +59,7 @@ import numpy as np
 import pandas as pd
 import scipy.signal
 
+from enclab.core.canonical import Channel
 from enclab.propagation import analysis
 from enclab.propagation import filters as flt
 from enclab.propagation import moments as mom
@@ -349,9 +350,9 @@ class _Accumulation:
         self.joint_arch = device is not None and "joint" in architectures
         operational = device is not None and "operational" in architectures
         self.kinematics = None if device is None else _Kinematics(device)
-        self.truth_counts = all(c["storage"] == "counts" for c in self.chans)
-        self.truth_steps = np.array([float(c["step"]) if c["storage"] == "counts" else 0.0
-                                     for c in self.chans])
+        truths = [Channel.of(c) for c in self.chans]
+        self.truth_counts = all(c.is_counts for c in truths)
+        self.truth_steps = np.array([c.step if c.is_counts else 0.0 for c in truths])
         self.by_name = {c["name"]: c for c in self.chans}
         self.blocks = []
 

@@ -67,8 +67,7 @@ log.
 References
 ----------
 .. [1] N. Colonnese and A. M. Okamura, "Propagation of joint space quantization error to
-   operational space coordinates and their derivatives", Section III and Table II
-   (paper 000 in ``papers/``).
+   operational space coordinates and their derivatives", Section III and Table II.
 .. [2] B. Widrow and I. Kollar, *Quantization Noise*, Cambridge University Press, 2008
    (conditions for PQN; characteristic-function view of the quantization error).
 .. [3] R. M. Gray, "Quantization noise spectra", IEEE Trans. Inf. Theory 36(6), 1990

@@ -1,6 +1,6 @@
 """Shared terms of a rig: a smooth calibration map of an angle and a nonlinear compliance.
 
-Both are *linear* in their coefficients, so a rig fit (:mod:`enclab.residuals.rig`) stacks
+Both are *linear* in their coefficients, so a rig fit (:mod:`enclab.rig.fit`) stacks
 their columns over many runs and solves one least-squares problem.
 
 **Calibration map** (:class:`MapBasis`). A repeatable error of the measured side that depends on
@@ -29,7 +29,7 @@ of magnitude up to half the play, where the torque is small, largest at the load
 the friction.
 
 **Torque map** (a :class:`MapBasis` on a torque, ``extrapolate="linear"``; built by
-:func:`enclab.residuals.rig.torque_map_basis`): the take-up curve of the transmission as a
+:func:`enclab.rig.fit.torque_map_basis`): the take-up curve of the transmission as a
 spline of the torque it carries, beside the ``linear`` term. A gear with backlash rests on the
 side its torque pushes it to: where the torque stays near zero during a stroke (a load that
 nearly balances the friction) the output floats partway across the play, a twist that a play

@@ -69,15 +69,12 @@ def residual_pairs(meta_or_entry: Mapping) -> list[dict]:
 
 
 def channel_values(df: pd.DataFrame, meta: Mapping, name: str) -> tuple[np.ndarray, float | None]:
-    """SI values of a canonical channel and its step (``None`` for a float channel)."""
-    chan = next((c for c in meta["channels"] if c["name"] == name), None)
-    if chan is None:
-        raise ValueError(f"log {meta.get('log_id')!r} has no channel {name!r}; channels "
-                         f"{[c['name'] for c in meta['channels']]}")
-    col = df[name].to_numpy()
-    if chan["storage"] == "counts":
-        return col.astype(np.float64) * float(chan["step"]), float(chan["step"])
-    return col.astype(np.float64), None
+    """SI values of a canonical channel and its step (``None`` for a float channel):
+    :class:`enclab.core.canonical.Channel` ``values`` and ``step``."""
+    from enclab.core.canonical import Channel
+
+    channel = Channel.named(meta, name, df)
+    return channel.values, channel.step
 
 
 def _selector() -> Callable:

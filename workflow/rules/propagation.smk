@@ -1,4 +1,4 @@
-# Paper 000 per log: requantize -> kinematics -> derivatives / moments / theory -> summary.
+# Quantization error per log: requantize -> kinematics -> derivatives / moments / theory -> summary.
 
 
 rule requantize:
@@ -112,7 +112,7 @@ rule log_figures:
         derivatives="results/{log_id}/derivatives.parquet",
         summary="results/{log_id}/summary.json",
     output:
-        # in the report as thumbnails (REPORT_FIGURES, batch.smk)
+        # in the report as thumbnails (enclab.plan.REPORT_FIGURES)
         errors="results/{log_id}/figures/errors.png",
         comparison="results/{log_id}/figures/comparison.png",
     params:

@@ -1,9 +1,10 @@
 """The rig report: held-out tables per split and condition, the map and compliance curves with
 their bands, and what remains at reversals.
 
-:func:`analyse_rig` runs :mod:`enclab.residuals.rig` on the runs of one rig and one measured
-channel; :func:`map_figure`, :func:`compliance_figure`, :func:`heldout_figure` and
-:func:`remains_figure` return Figures (the caller saves them); :func:`markdown` the report text.
+From the result of :func:`enclab.rig.pipeline.analyse_rig` (one rig, one measured channel):
+:func:`map_figure`, :func:`compliance_figure`, :func:`heldout_figure` and :func:`remains_figure`
+return Figures (the caller saves them); :func:`markdown` the report text; :func:`fit_block` the
+JSON block of a fit.
 """
 from __future__ import annotations
 
@@ -13,19 +14,16 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from enclab.residuals import rig as rg
+from enclab.rig import fit as rg
 from enclab.residuals.calibration import compliance_curve, compliance_names
 
-__all__ = ["analyse_rig", "remains", "map_figure", "compliance_figure", "heldout_figure",
-           "remains_figure", "markdown", "condition_table", "split_table", "extrapolation_lines",
-           "coverage_text", "EXTRAPOLATION_RATIO", "rule_spec"]
+__all__ = ["remains", "map_figure", "compliance_figure", "heldout_figure", "remains_figure",
+           "markdown", "condition_table", "split_table", "extrapolation_lines", "coverage_text",
+           "fit_block"]
 
 MRAD = 1e3
 #: Largest relative change of a shared parameter between folds for it to count as pinned down.
 SPREAD = 0.15
-#: Default of ``rig.extrapolation_ratio`` (config.yaml): a split whose held-out std exceeds this
-#: multiple of the other splits' or of its training runs' own held-out std does not extrapolate.
-EXTRAPOLATION_RATIO = 2.0
 
 
 def remains(runs: Sequence[rg.Run], residuals: Mapping, spec: rg.RigSpec, bin_width: float = 0.002) -> dict:
@@ -62,43 +60,6 @@ def remains(runs: Sequence[rg.Run], residuals: Mapping, spec: rg.RigSpec, bin_wi
             "outside_std": float(np.sqrt(ss_o / eo.size)), "window_fraction": ew.size / (ew.size + eo.size),
             "repeatable_share": 1.0 - float(within @ within) / ss_w if ss_w else float("nan"),
             "n_window": int(ew.size), "n_outside": int(eo.size)}
-
-
-def analyse_rig(runs: Sequence[rg.Run], spec: rg.RigSpec, splits: Sequence[Mapping],
-                spacings: Sequence[float] | None, variants=None,
-                torque_knots: Sequence[int] | None = None,
-                extrapolation_ratio: float = EXTRAPOLATION_RATIO) -> dict:
-    """Held-out evaluation of one rig and one measured channel, and the fit on every run.
-
-    ``variants``: candidate model forms chosen per fold on its training runs
-    (:func:`enclab.residuals.rig.evaluate`; ``"takeup"``: the declared compliance or the play
-    take-up, with or without the reversal transient). ``torque_knots``: candidate numbers of
-    intervals of the torque maps of ``spec`` (:func:`enclab.residuals.rig.choose_model`).
-
-    Returns
-    -------
-    dict
-        ``rows`` (one per fold and run, :func:`enclab.residuals.rig.evaluate`), ``folds``
-        (the fold results), ``spread`` (:func:`enclab.residuals.rig.fold_spread` over the folds
-        of condition splits), ``remains`` per split, ``final`` (the fit on all runs, its knot
-        spacing chosen by leave-one-run-out), ``spacing_scores``, ``extrapolation`` (per
-        condition split, :func:`enclab.residuals.rig.extrapolation` with ``extrapolation_ratio``)
-        and ``coverage`` (:func:`enclab.residuals.rig.coverage` of all runs: where the final fit
-        stops interpolating).
-    """
-    folds = rg.make_folds(runs, splits)
-    rows, out = rg.evaluate(runs, spec, folds, spacings, keep_residuals=True, variants=variants,
-                            torque_knots=torque_knots)
-    rem = {}
-    for split in dict.fromkeys(f["split"] for f in out):
-        res = {k: v for f in out if f["split"] == split for k, v in f["residuals"].items()}
-        rem[split] = remains(runs, res, spec)
-    fspec, scores, _ = rg.choose_model(runs, spec, spacings, variants, torque_knots=torque_knots)
-    final = rg.fit_rig(runs, fspec)
-    return {"rows": rows, "folds": out, "spread": rg.fold_spread(out) if out else {}, "remains": rem,
-            "final": final, "spacing_scores": scores, "spec": spec,
-            "extrapolation": rg.extrapolation(runs, rows, out, extrapolation_ratio),
-            "coverage": rg.coverage(runs, spec.t_skip)}
 
 
 def split_table(rows: Sequence[Mapping]) -> pd.DataFrame:
@@ -417,7 +378,7 @@ def _fmt_values(values) -> str:
 
 
 def coverage_text(cov: Mapping) -> str:
-    """The conditions, torque ranges and angle range of a :func:`enclab.residuals.rig.coverage`."""
+    """The conditions, torque ranges and angle range of a :func:`enclab.rig.fit.coverage`."""
     parts = [f"{k} {_fmt_values(v)}" for k, v in cov["conditions"].items()]
     parts += [f"{c} {lo:.3g} .. {hi:.3g} N m" for c, (lo, hi) in cov["torques"].items()]
     parts.append(f"measured-side angle {cov['angle'][0]:.3g} .. {cov['angle'][1]:.3g} rad")
@@ -477,7 +438,9 @@ def extrapolation_lines(result: Mapping) -> list[str]:
     return lines
 
 
-def _fit_block(fit: rg.RigFit) -> dict:
+def fit_block(fit: rg.RigFit) -> dict:
+    """The JSON block of one rig fit: its settings, shared terms with 90 % intervals, per-run
+    effects and, when fitted, the calibration map's curve and band on a grid."""
     block = {"spacing": fit.spec.spacing, "shared": fit.shared(),
              "compliance": dict(fit.spec.compliance), "torque_scales": dict(fit.spec.torque_scales),
              "torque_map": {c: {"lo": float(v[0]), "hi": float(v[1]), "intervals": int(v[2]),
@@ -498,62 +461,3 @@ def _fit_block(fit: rg.RigFit) -> dict:
                               "band_hi": hi.tolist(), "gear_ratio": fit.spec.gear_ratio,
                               "harmonics": fit.spec.input_harmonics}
     return block
-
-
-def rule_spec(settings: Mapping, compliance: Mapping) -> tuple[rg.RigSpec, list]:
-    """The rig rule's model from the ``rig`` settings of ``config.yaml`` and a manifest's declared
-    ``compliance``: ``(spec, candidate numbers of torque-map intervals)``. The spec starts at the
-    largest knot spacing; the compliance's form, the reversal transient, a torque map's intervals
-    and the spacing are then chosen per fold on its training runs (:func:`report_rig` with
-    ``variants="takeup"``)."""
-    knots = list(settings.get("torque_knots") or [8])
-    spec = rg.RigSpec(spacing=max(settings["spacings"]), max_play=settings["max_play"],
-                      travel=settings["travel"], t_skip=settings["t_skip"], transient=settings.get("transient"),
-                      latency=True if settings.get("latency") == "run" else "shared",
-                      torque_map_forms=tuple(settings.get("torque_map_forms") or ("linear",)),
-                      **rg.declared_compliance(compliance, knots[0]))
-    return spec, knots
-
-
-def report_rig(name: str, channel: str, runs: Sequence[rg.Run], spec: rg.RigSpec,
-               splits: Sequence[Mapping], spacings: Sequence[float] | None,
-               truth_counts_per_rev: float | None = None, variants=None,
-               torque_knots: Sequence[int] | None = None,
-               extrapolation_ratio: float = EXTRAPOLATION_RATIO) -> dict:
-    """Everything the rig rule writes for one measured channel: ``block`` (JSON), ``tables``
-    (``heldout`` per fold and run, ``splits``, ``conditions``), ``figures`` (``map``,
-    ``compliance``, ``heldout``, ``remains``) and ``markdown``."""
-    result = analyse_rig(runs, spec, splits, spacings, variants, torque_knots, extrapolation_ratio)
-    conditions = list(dict.fromkeys(k for r in runs for k in r.conditions))
-    torques = {ch: (float(min(np.percentile(r.torques[ch], 0.5) for r in runs)),
-                    float(max(np.percentile(r.torques[ch], 99.5) for r in runs))) for ch in spec.compliance}
-    title = f"rig {name}: {channel}"
-    rows = [{k: v for k, v in r.items() if not k.endswith("_ss")} for r in result["rows"]]
-    block = {
-        "rig": name, "measured": channel, "runs": [r.run_id for r in runs],
-        "metric": "std of (reading - prediction) [rad]; steady strokes and all samples after t_skip",
-        "settings": {"travel": spec.travel, "t_skip": spec.t_skip, "max_play": spec.max_play,
-                     "latency": "run" if spec.latency is True else spec.latency,
-                     "compliance": dict(spec.compliance), "transient": spec.transient,
-                     "spacings": list(spacings or []), "extrapolation_ratio": extrapolation_ratio},
-        "splits": split_table(result["rows"]).to_dict("records"),
-        "heldout": rows,
-        "folds": [{"split": f["split"], "fold": str(f["fold"]), "test": f["test"],
-                   "spacing_scores": f["spacing_scores"], "variant_scores": f.get("variant_scores"),
-                   **_fit_block(f["fit"])} for f in result["folds"]],
-        "spread": result["spread"], "remains": result["remains"],
-        "final": {**_fit_block(result["final"]), "spacing_scores": result["spacing_scores"]},
-        # Per condition split: whether the fit extrapolates to its test conditions, the term
-        # that carries the held-out excess, and what the training and test runs covered.
-        "extrapolation": result["extrapolation"],
-        "coverage": result["coverage"],
-    }
-    return {
-        "block": block,
-        "tables": {"heldout": pd.DataFrame(rows), "splits": split_table(result["rows"]),
-                   "conditions": condition_table(result["rows"], conditions)},
-        "figures": {"map": map_figure(result, title), "compliance": compliance_figure(result, torques, title),
-                    "heldout": heldout_figure(result, conditions, title),
-                    "remains": remains_figure(result, runs, title)},
-        "markdown": markdown(name, channel, result, conditions, truth_counts_per_rev),
-    }

@@ -69,7 +69,7 @@ __all__ = ["Run", "RigSpec", "RigFit", "steady_mask", "fit_rig", "predict_run", 
            "choose_model", "takeup_variants", "heldout_rms",
            "inner_groups", "make_folds", "declared_compliance", "torque_map_basis", "torque_range", "resolve_torque_map",
            "evaluate", "pooled", "fold_spread", "loose_parameters", "floor_std", "map_range",
-           "run_from_canonical", "term_groups", "refit_shared", "coverage", "extrapolation"]
+           "term_groups", "refit_shared", "coverage", "extrapolation"]
 
 
 @dataclass
@@ -974,22 +974,6 @@ def loose_parameters(spread: Mapping, max_spread: float) -> list[str]:
     return sorted(n for n, v in spread.items()
                   if (v.get("rel_dev") is not None and v["rel_dev"] > max_spread)
                   or v.get("kept_in", 0) < v.get("folds", 0))
-
-
-def run_from_canonical(df, meta: Mapping, measured: str, truth: str, torques: Sequence[str] = (),
-                       conditions: Mapping | None = None, run_id: str | None = None) -> Run:
-    """A :class:`Run` from a canonical log (:func:`enclab.core.canonical.read_canonical`): channel names of
-    the measured and truth angles and of the torques (N m) the compliance uses."""
-    from enclab.residuals.pipeline import channel_values
-
-    y, step = channel_values(df, meta, measured)
-    theta, truth_step = channel_values(df, meta, truth)
-    if step is None:
-        raise ValueError(f"log {meta.get('log_id')!r}: measured channel {measured!r} has no quantization step")
-    return Run(run_id=run_id or str(meta.get("log_id")), t=df["t"].to_numpy(np.float64), truth=theta,
-               measured=y, step=step, truth_step=truth_step,
-               torques={k: channel_values(df, meta, k)[0] for k in torques},
-               conditions=dict(conditions or {}))
 
 
 def simulate_rig(rng: np.random.Generator, conditions: Sequence[Mapping], *, duration: float = 4.0,

@@ -1,37 +1,39 @@
-"""The per-log quantization stages as file-to-file steps, shared by both execution modes.
+"""The per-log stages of the quantization-error analysis as file-to-file steps, shared by both
+execution modes.
 
 Each function reads its inputs with :mod:`enclab.core.canonical` and :mod:`enclab.core.atomic`,
-calls :mod:`enclab.propagation.analysis` and writes its output with :mod:`enclab.core.atomic`. The rule scripts (``scripts/<rule>.py``, one
-Snakemake job per stage and log) and the chunked mode (:func:`quantization_log`, every stage
-of several logs in one job, see ``workflow/rules/chunks.smk``) call the same functions in the
-same order on the same files, so both modes write byte-identical outputs.
+calls :mod:`enclab.propagation.analysis` and writes its output with :mod:`enclab.core.atomic`.
+The rule scripts (``scripts/<rule>.py``, one Snakemake job per stage and log) and the chunked
+mode (:func:`quantization_log`, every stage of several logs in one job, see
+``workflow/rules/chunks.smk``) call the same functions in the same order on the same files, so
+both modes write byte-identical outputs. A log's ``summary.json`` merges the blocks of every
+analysis it ran: :mod:`enclab.log_summary` adds the other analyses' blocks to
+:func:`summary_block`.
 """
 from __future__ import annotations
 
 import functools
-import logging
 import os
 from collections.abc import Mapping
 from pathlib import Path
 
 from enclab.core import atomic
-from enclab.core.canonical import read_canonical, write_canonical
+from enclab.core.canonical import Channel, read_canonical, write_canonical
 from enclab.core.errors import EnclabInputError
-from enclab.core.ingest import ingest_log
+from enclab.core.ingest import ingest_to_canonical
 from enclab.propagation import analysis
 from enclab.propagation import filters as flt
-from enclab.residuals.pipeline import summary_block as residual_summary_block
 
 __all__ = [
     "FIGURE_OUTPUTS",
     "QUANTIZATION_OUTPUTS",
     "check_cutoffs",
-    "ingest",
     "requantize",
     "kinematics",
     "derivatives",
     "moments",
     "theory",
+    "summary_block",
     "summary",
     "log_figures",
     "quantization_log",
@@ -43,7 +45,8 @@ FIGURE_OUTPUTS = {
     "errors": "figures/errors.png",
     "comparison": "figures/comparison.png",
 }
-# Output name -> file name under results/<log_id>/ of the paper-000 stages, in stage order.
+# Output name -> file name under results/<log_id>/ of the quantization-error stages, in
+# stage order.
 QUANTIZATION_OUTPUTS = {
     "canonical": "canonical.parquet",
     "requantized": "requantized.parquet",
@@ -55,17 +58,6 @@ QUANTIZATION_OUTPUTS = {
 }
 
 PathLike = str | os.PathLike
-
-
-_LOG = logging.getLogger("enclab.stages")
-
-
-def ingest(entry: Mapping, data_root: PathLike, devices: Mapping, canonical: PathLike) -> None:
-    """One manifest entry -> the canonical Parquet log (its warnings are logged too)."""
-    df, meta = ingest_log(entry, data_root, devices)
-    for line in meta.get("warnings") or []:
-        _LOG.warning("[%s] %s", meta["log_id"], line)
-    write_canonical(df, meta, canonical)
 
 
 @functools.lru_cache(maxsize=64)
@@ -148,14 +140,11 @@ def theory(requantized: PathLike, kinematics_path: PathLike, settings: Mapping,
     atomic.write_json({"log_id": meta["log_id"], "rows": rows}, out)
 
 
-def summary(inputs: Mapping[str, PathLike], out: PathLike) -> None:
-    """``summary.json`` from the blocks of the stages the log ran.
+def summary_block(inputs: Mapping[str, PathLike]) -> dict:
+    """The quantization-error block of ``summary.json``, with the log's ingest warnings.
 
-    ``inputs`` holds ``canonical`` and, for the quantization stages, ``requantized``,
-    ``moments`` and ``theory``; for the paper-002 stage, ``lrde``; for the residual stage,
-    ``residuals`` (one ``residuals.json`` path or a list of them, one per measured channel).
-    A coarse log without a truth/measured pair takes its ``residuals`` block from the held-out
-    motion-model comparison of its ``lrde`` block (:mod:`enclab.lrde.compare`).
+    ``inputs`` holds ``canonical`` and, when the log ran the quantization-error stages,
+    ``requantized``, ``moments`` and ``theory``; without them the block is the log's header.
     """
     if "moments" in inputs:
         req, meta = read_canonical(inputs["requantized"])
@@ -166,15 +155,13 @@ def summary(inputs: Mapping[str, PathLike], out: PathLike) -> None:
         _, meta = read_canonical(inputs["canonical"])
         block = analysis.log_header(meta)
     block["warnings"] = list(meta.get("warnings") or [])
-    if "lrde" in inputs:
-        block["lrde"] = atomic.read_json(inputs["lrde"])
-    if "residuals" in inputs:
-        paths = inputs["residuals"]
-        paths = [paths] if isinstance(paths, (str, os.PathLike)) else list(paths)
-        block["residuals"] = residual_summary_block([atomic.read_json(p) for p in paths])
-    elif (block.get("lrde") or {}).get("residuals"):
-        block["residuals"] = block["lrde"]["residuals"]
-    atomic.write_json(block, out)
+    return block
+
+
+def summary(inputs: Mapping[str, PathLike], out: PathLike) -> None:
+    """``summary.json`` of a log that ran the quantization-error stages alone
+    (:func:`summary_block`; :func:`enclab.log_summary.summary` adds other analyses' blocks)."""
+    atomic.write_json(summary_block(inputs), out)
 
 
 def log_figures(inputs: Mapping[str, PathLike], export: list, settle_tol: float,
@@ -196,19 +183,18 @@ def log_figures(inputs: Mapping[str, PathLike], export: list, settle_tol: float,
     atomic.save_figure(plots.error_trace_figure(tr["t"], tr["errors"], title, tr["unit"],
                                                 step=tr["step"]), errors)
     table = analysis.summary_table(summary_block)
-    truth = analysis.truth_channels(meta)[0]
-    native = truth.get("step") or truth.get("native_step")
+    truth = Channel.of(analysis.truth_channels(meta)[0])
     fig = plots.real_log_figure(table, f"{meta['log_id']}: measured vs theory",
-                                native_step=native, step_unit=truth["unit"])
+                                native_step=truth.grid, step_unit=truth.unit)
     atomic.save_figure(fig, comparison)
 
 
 def quantization_log(entry: Mapping, folder: PathLike, config: Mapping,
                      data_root: PathLike, figures: bool = False) -> None:
-    """Every paper-000 stage of one log, ``ingest`` to ``summary``, into ``folder``.
+    """Every quantization-error stage of one log, ``ingest`` to ``summary``, into ``folder``.
 
     The same calls, in the same order, as the per-stage rules of
-    ``workflow/rules/{ingest,quantization}.smk``; ``folder`` receives the files of
+    ``workflow/rules/{ingest,propagation}.smk``; ``folder`` receives the files of
     :data:`QUANTIZATION_OUTPUTS`, and with ``figures`` those of :data:`FIGURE_OUTPUTS`.
 
     Parameters
@@ -227,7 +213,7 @@ def quantization_log(entry: Mapping, folder: PathLike, config: Mapping,
     folder = Path(folder)
     out = {name: folder / file for name, file in QUANTIZATION_OUTPUTS.items()}
     d = config["derivatives"]
-    ingest(entry, data_root, config["devices"], out["canonical"])
+    ingest_to_canonical(entry, data_root, config["devices"], out["canonical"])
     requantize(out["canonical"], config["requantize"], out["requantized"])
     kinematics(out["requantized"], out["kinematics"])
     derivatives(out["requantized"], d, d["export"], out["derivatives"])
