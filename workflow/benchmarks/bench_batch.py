@@ -6,8 +6,8 @@ Generates N simulated Phantom runs (Colonnese & Okamura protocol: 3 joints, 1 kH
 default, ``enclab.propagation.simulate.phantom_protocol_run``), a manifest and a configuration in a
 temporary workspace, then measures, in one run of this script:
 
-- ``in-process``: the paper-000 stages of every log called one after the other in one Python
-  (``enclab.stages.quantization_log`` through ``enclab.runner.run_chunk``, the same calls and
+- ``in-process``: the quantization-error stages of every log called one after the other in one Python
+  (``enclab.propagation.pipeline.quantization_log`` through ``enclab.runner.run_chunk``, the same calls and
   files as the workflow): the compute the workflow cannot avoid;
 - ``in-process xC``: the same, split into C Pythons running side by side (one share of the logs
   each): what the compute alone costs when C processes share the machine, as the workflow's
@@ -133,7 +133,7 @@ def make_workspace(work: Path, n: int, duration_s: float, bank: str, seed: int) 
 def in_process(work: Path, out: Path, share: int = 0, shares: int = 1) -> None:
     """Every log's stages in this one Python (called in a child process by :func:`main`), or
     the ``share``-th of ``shares`` contiguous parts of the logs."""
-    from enclab import stages
+    from enclab.propagation import pipeline
     from enclab.core import manifest, readers
     from enclab.runner import run_chunk
 
@@ -144,7 +144,7 @@ def in_process(work: Path, out: Path, share: int = 0, shares: int = 1) -> None:
     data_root, entries = readers.read_manifest(config["manifest"], devices=config["devices"])
     size = math.ceil(len(entries) / shares)
     entries = entries[share * size:(share + 1) * size]
-    status = run_chunk(entries, lambda e, folder: stages.quantization_log(e, folder, config,
+    status = run_chunk(entries, lambda e, folder: pipeline.quantization_log(e, folder, config,
                                                                           data_root), out)
     failed = [k for k, v in status.items() if v is not None]
     if failed:

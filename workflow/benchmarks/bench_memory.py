@@ -106,11 +106,11 @@ def run_ingest(work: pathlib.Path, log: pathlib.Path, log_id: str) -> tuple[int,
     code = (
         "import sys, yaml\n"
         "from enclab.core.manifest import validate_manifest\n"
-        "from enclab import stages\n"
+        "from enclab.core.ingest import ingest_to_canonical\n"
         f"config = yaml.safe_load(open({str(ROOT / 'config.yaml')!r}))\n"
         f"doc = yaml.safe_load(open({str(work / 'manifest.yaml')!r}))\n"
         "root, (entry,) = validate_manifest(doc, config['devices'], 'manifest.yaml')\n"
-        f"stages.ingest(entry, root, config['devices'], {str(work / 'canonical.parquet')!r})\n")
+        f"ingest_to_canonical(entry, root, config['devices'], {str(work / 'canonical.parquet')!r})\n")
     _write_inputs(work, log, log_id)
     proc = subprocess.run(["/usr/bin/time", "-v", sys.executable, "-c", code], cwd=work,
                           capture_output=True, text=True)

@@ -4,7 +4,7 @@ MRDLab da Vinci tool as a rig: the CUI output encoder of all 20 runs fitted toge
 
 The 20 runs of ``Tool_4_Maryland_L_2`` (5 frequencies x 4 reaction-torque levels, the rig
 ``mrdlab_tool4`` of ``data/manifest.real.yaml``) against the back-end motor encoder through the
-35:1 gear. A ladder of rig models (:mod:`enclab.residuals.rig`), each fitted on training runs and
+35:1 gear. A ladder of rig models (:mod:`enclab.rig.fit`), each fitted on training runs and
 scored on held-out runs:
 
 - ``play+scale``: per-run offset and play width, shared scale;
@@ -30,7 +30,7 @@ scored on held-out runs:
 - ``rig+torquemap+form`` (the rig rule's model for ``compliance: {torque_back: [linear, map],
   torque_front: [linear]}``): the same with the reversal transient kept or left out and each
   torque channel kept or left out, chosen per fold on the training runs (one-standard-error
-  rule, :func:`enclab.residuals.rig.choose_variant`) before the number of intervals.
+  rule, :func:`enclab.rig.fit.choose_variant`) before the number of intervals.
 
 Splits: frequency (train 0.1/0.3/0.5 Hz, test 0.2/0.4 Hz) and load (train 10/20 %, test 30/40 %);
 ``--loro`` runs leave-one-run-out folds instead (knot spacing fixed at 0.05 rad, ``--loro-max``
@@ -43,7 +43,7 @@ of the twist against that torque on the range the folds' maps share, and the lar
 a fold's curve from their mean relative to it), and copies both to ``--copy-to`` when given.
 
 ``--rules`` instead runs the rig rule's own model (``config.yaml`` ``rig`` settings and the
-manifest's declared compliance, :func:`enclab.residuals.rig_report.report_rig`) on each rig of
+manifest's declared compliance, :func:`enclab.rig.pipeline.report_rig`) on each rig of
 ``--rigs`` (default: ``mrdlab_tool4``, the 20 runs of ``Tool_4_Maryland_L_2``, and
 ``mrdlab_tool4_l4``, the 50 runs of ``Tool_4_Maryland_L_4`` to 100 % load, whose load split
 trains on loads up to 50 % and tests 60-100 %) and writes ``results/benchmarks/mrdlab_rigs.csv``:
@@ -80,9 +80,10 @@ import pandas as pd  # noqa: E402
 import yaml  # noqa: E402
 
 from enclab.core import atomic, ingest, readers  # noqa: E402
-from enclab.residuals import rig  # noqa: E402
-from enclab.residuals.rig_manifest import rig_groups  # noqa: E402
-from enclab.residuals.rig_report import remains, report_rig, rule_spec, split_table  # noqa: E402
+from enclab.rig import fit as rig  # noqa: E402
+from enclab.rig.manifest import rig_groups  # noqa: E402
+from enclab.rig.pipeline import report_rig, rule_spec, run_from_canonical  # noqa: E402
+from enclab.rig.report import remains, split_table  # noqa: E402
 from .helpers import ROOT, reference_loop_seconds, stamp  # noqa: E402
 
 RIG = "mrdlab_tool4"
@@ -121,7 +122,7 @@ def load_runs(name: str = RIG, with_group: bool = False):
     runs = []
     for member in group["runs"]:
         df, meta = ingest.ingest_log(by_id[member["log_id"]], ROOT / data_root, config["devices"])
-        runs.append(rig.run_from_canonical(df, meta, pair["measured"], pair["truth"],
+        runs.append(run_from_canonical(df, meta, pair["measured"], pair["truth"],
                                            list(group["compliance"] or COMP), member["conditions"],
                                            member["log_id"]))
     if with_group:

@@ -234,7 +234,7 @@ def _add_residuals(sub) -> None:
 
 
 def _add_lrde(sub) -> None:
-    p = sub.add_parser("lrde", help="stroke, bias and offset of a coarse encoder (paper 002)",
+    p = sub.add_parser("lrde", help="stroke, bias and offset of a coarse encoder (Zhang & Gao)",
                        description="The low-resolution encoder analysis on one file: dwell "
                        "patterns and the Bayesian fit of stroke, bias and offset.")
     p.add_argument("--counts", required=True, metavar="COL", help="coarse encoder counts column")

@@ -8,10 +8,11 @@
 - :mod:`enclab.core.canonical`  the canonical log (Parquet + metadata), whole or streamed
 - :mod:`enclab.core.atomic`     atomic writers of results (text, JSON, tables, figures) and readers
 - :mod:`enclab.core.quantize`   the encoder/quantizer model on integer counts
+- :mod:`enclab.core.resources`  where the workflow's files are (checkout or installed copy)
 
 Only :mod:`~enclab.core.readers`, :mod:`~enclab.core.canonical` and :mod:`~enclab.core.atomic`
 touch disk. Nothing here imports an analysis package (``propagation``, ``lrde``, ``residuals``,
 ``design``); ``tests/test_imports.py`` checks it.
 """
 
-__all__ = ["errors", "manifest", "readers", "ingest", "canonical", "atomic", "quantize"]
+__all__ = ["errors", "manifest", "readers", "ingest", "canonical", "atomic", "quantize", "resources"]

@@ -1,4 +1,4 @@
-"""Figures of the extreme low-resolution encoder analysis (paper 002).
+"""Figures of the extreme low-resolution encoder analysis (Zhang & Gao).
 
 Each function returns a :class:`matplotlib.figure.Figure` built without ``pyplot`` (nothing
 global to close); the caller saves it. Angles are shown in degrees (the paper's unit), the

@@ -1,4 +1,4 @@
-"""The per-log quantization analysis of paper 000, one function per pipeline stage.
+"""The per-log quantization-error analysis (Colonnese & Okamura), one function per pipeline stage.
 
 Every function is pure: a canonical log (``DataFrame`` + metadata dict, see
 ``docs/architecture.md``) and settings in, tables and dicts out. The Snakemake scripts in
