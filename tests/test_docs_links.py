@@ -90,7 +90,7 @@ def _headings(page: Path) -> set[str]:
 def test_sections_named_in_prose_and_comments_exist():
     missing = []
     for path in CHECKED:
-        if path == Path(__file__).resolve() or not path.is_file():
+        if path in GUARDS or not path.is_file():
             continue
         for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
             for page, section in SECTION.findall(line):
@@ -103,10 +103,14 @@ def test_sections_named_in_prose_and_comments_exist():
     assert not missing, "\n".join(missing)
 
 
+# Tests that guard against these strings name them.
+GUARDS = {Path(__file__).resolve(), ROOT / "tests" / "test_benchmarks_package.py"}
+
+
 def test_no_file_cites_a_document_outside_the_repository_or_an_absolute_path():
     found = []
     for path in CHECKED:
-        if path == Path(__file__).resolve() or not path.is_file():
+        if path in GUARDS or not path.is_file():
             continue
         for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
             if FOREIGN.search(line):

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from enclab import report
+from enclab import plan, report
 from enclab.core.quantize import quantize
 from workspace import ROOT, SNAKEMAKE
 
@@ -49,7 +49,7 @@ def _summaries():
 RIG = {"rig": "tool", "measured": "cui", "runs": ["rig_a", "rig_b"],
        "splits": [{"split": "load", "before_steady": 0.0136, "after_steady": 0.00056,
                    "after_all": 0.00077, "floor": 0.00022}], "spread": {}}
-DESIGN = {"budget": [{"order": 1, "std": 0.01}],
+DESIGN_BLOCK = {"budget": [{"order": 1, "std": 0.01}],
           "chosen": {"resolution": {"q1": 4096}, "filters": [{"label": "d1 n2 fc40"}],
                      "cost": 12.0, "lag_s": 0.008, "margin": 0.1}, "check": {}}
 
@@ -58,7 +58,7 @@ def _run(**kwargs):
     return report.run_summary(_summaries(), ["q1", "coarse", "rig_a", "rig_b", "bad"],
                               {"bad": {"stage": "ingest", "error": "bad.csv: column 'q'"}},
                               ratios=RATIOS, violations=pd.DataFrame(), rigs=[RIG],
-                              design=DESIGN, written={"summary.json": 4}, **kwargs)
+                              design=DESIGN_BLOCK, written={"summary.json": 4}, **kwargs)
 
 
 class _Elements(HTMLParser):
@@ -136,13 +136,12 @@ def test_verdicts_and_one_figure_per_analysis_come_first():
 
 
 def test_every_headline_figure_is_a_thumbnail_the_workflow_writes():
-    rules = (ROOT / "workflow/rules/common.smk").read_text()
     for figure in report.headline_figures(_run()):
         kind = figure["thumbnail"].split("/")[3]
-        pattern = re.search(rf'"{kind}": \("results/([^"]+)"', rules)
-        assert pattern, kind
+        assert kind in plan.REPORT_FIGURES, kind
+        source = plan.REPORT_FIGURES[kind].pattern.removeprefix("results/")
         # the full-size figure the caption links is the thumbnail's source
-        assert re.fullmatch(re.sub(r"\\\{[a-z_]+\\\}", "[^/]+", re.escape(pattern[1])),
+        assert re.fullmatch(re.sub(r"\\\{[a-z_]+\\\}", "[^/]+", re.escape(source)),
                             figure["figure"]), (kind, figure["figure"])
 
 
