@@ -30,7 +30,8 @@ rebuilt from every row present.
 
 Commands of the table in the docs (each row names its own): ``--lengths 4000 --draws 100``,
 ``--lengths 40000 --draws 100``, ``--lengths 400000 --draws 10``, ``--lengths 4000000 --draws 5``
-(the larger cells kept small: a 4,000,000-sample log takes 25-35 s of CPU; rerun with more draws where the machine is free).
+(the larger cells kept small: a 4,000,000-sample log takes 25-35 s of CPU; rerun with more
+draws where the machine is free).
 """
 from __future__ import annotations
 
