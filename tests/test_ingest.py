@@ -154,6 +154,17 @@ def test_detect_grid_with_large_multiples_and_print_rounding():
     assert off_grid(k * 5e-8, found).max() < 1e-6
 
 
+def test_detect_grid_finds_the_step_of_a_motion_without_one_step_jumps():
+    # a fast axis moving 32 or 33 steps per sample never shows a one-step jump: the step is the
+    # common divisor of the jumps, not the smallest jump
+    step = 2 * np.pi / 32768
+    rng = np.random.default_rng(5)
+    k = np.cumsum(rng.choice([32, 33], size=4000))
+    assert detect_grid(k * step) == pytest.approx(step, rel=1e-12)
+    # the same jumps off a grid through zero (an offset of a third of a step) are no grid
+    assert detect_grid((k + 1 / 3) * step) is None
+
+
 def test_detect_grid_rejects_smooth_and_constant_signals():
     assert detect_grid(np.sin(np.linspace(0, 3, 500))) is None
     assert detect_grid(np.full(10, 0.3)) is None

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from enclab.core.ingest import grid_step
 from enclab.residuals import effects as fx
 from enclab.residuals import select as sel
 from enclab.residuals.select import select_effects
@@ -24,12 +25,12 @@ def test_grid_step_of_a_rotating_axis_whose_jumps_are_32_or_33_steps():
     x = TRUTH_STEP * np.round((0.3 + 2 * np.pi * t) / TRUTH_STEP)
     d = np.round(np.abs(np.diff(x)) / TRUTH_STEP)
     assert set(np.unique(d)) == {32.0, 33.0}  # no jump of one step: the smallest jump is not the step
-    assert sel.estimate_grid_step(x) == pytest.approx(TRUTH_STEP, rel=1e-9)
+    assert grid_step(x) == pytest.approx(TRUTH_STEP, rel=1e-9)
     # 9 significant digits of values up to 63 rad: |e| <= 5e-8 rad per value. The least-squares
     # step sum(k d) / sum(k^2) over jumps of k = 32 or 33 steps telescopes the errors except
     # where k changes: |error| <= 5e-8 (n + 66) / (n 32^2) = 4.9e-11 rad = 2.6e-7 relative
-    assert sel.estimate_grid_step(_nine_digits(x)) == pytest.approx(TRUTH_STEP, rel=1e-6)
-    assert sel.estimate_grid_step(np.sin(t) + 60.0) == 0.0
+    assert grid_step(_nine_digits(x)) == pytest.approx(TRUTH_STEP, rel=1e-6)
+    assert grid_step(np.sin(t) + 60.0) == 0.0
 
 
 def test_rotating_axis_with_a_scale_error_is_explained_against_a_non_zero_floor():

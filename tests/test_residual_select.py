@@ -9,6 +9,7 @@ import pytest
 from scipy import integrate, stats
 from scipy.special import log_ndtr
 
+from enclab.core.ingest import grid_step
 from enclab.residuals import select as sel
 from enclab.residuals.select import select_effects
 from enclab.residuals.simulate import random_map, random_motion, random_torque, simulate_log
@@ -230,8 +231,8 @@ def test_summary_block_and_prediction():
 
 def test_truth_step_is_estimated_from_the_truth_grid():
     log = _log(9)
-    assert sel.estimate_grid_step(log["truth"]) == pytest.approx(TRUTH_STEP, rel=1e-9)
-    assert sel.estimate_grid_step(np.sin(np.linspace(0, 1, 100))) == 0.0
+    assert grid_step(log["truth"]) == pytest.approx(TRUTH_STEP, rel=1e-9)
+    assert grid_step(np.sin(np.linspace(0, 1, 100))) == 0.0
 
 
 # ------------------------------------------------------------------------ input errors

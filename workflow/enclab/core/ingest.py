@@ -40,6 +40,7 @@ __all__ = [
     "canonicalize",
     "check_text_memory",
     "detect_grid",
+    "grid_step",
     "off_grid",
     "collapse_repeats",
     "scale_ratio",
@@ -107,13 +108,60 @@ def off_grid(values: np.ndarray, step: float) -> np.ndarray:
     return np.abs(scaled - np.rint(scaled))
 
 
+def grid_step(x, rtol: float = 1e-8) -> float:
+    """The grid step of a quantized signal (the common divisor of all its jumps), or 0.
+
+    The step is the real greatest common divisor of the sample-to-sample jumps (Euclid's
+    algorithm on the distinct jump sizes, remainders below ``rtol * max|x|`` taken as zero),
+    refined by least squares over every jump. It need not be the smallest jump: a fast motion
+    (a rotating axis moving 32 or 33 truth steps per sample) has no jump of one step. ``rtol``
+    admits the rounding of values written with 9 significant digits far from zero (60 rad of a
+    10-turn log). Returns 0 when the jumps have no common divisor well above that tolerance
+    and no more than 2**20 times below the largest jump (a continuous channel).
+    """
+    x = np.asarray(x, float)
+    d = np.abs(np.diff(x))
+    scale = max(float(np.max(np.abs(x))), 1e-300)
+    tol = max(rtol * scale, 1e3 * np.finfo(float).eps * scale)
+    d = d[d > tol]
+    if d.size == 0:
+        return 0.0
+    sizes = np.sort(d)
+    # distinct jump sizes (within the tolerance), largest first
+    distinct = sizes[np.concatenate(([True], np.diff(sizes) > 2.0 * tol))][::-1]
+    q = float(distinct[0])
+    for b in distinct[1:]:
+        a, b = max(q, float(b)), min(q, float(b))
+        # nearest-integer Euclid; the rounding error of a remainder grows with the quotient
+        # (a - n b carries n times b's error), so "zero" is judged against that
+        while True:
+            n = round(a / b)
+            rem = abs(a - n * b)
+            if rem <= 2.0 * tol * (1.0 + n):
+                break
+            a, b = b, rem
+            if b <= 10.0 * tol:
+                return 0.0
+        q = b
+    n = np.round(d / q)
+    if q <= 10.0 * tol or float(np.max(n)) > 2.0**20:
+        return 0.0
+    q = float(np.dot(d, n) / np.dot(n, n))
+    if np.max(np.abs(d / q - n)) > 0.01:
+        return 0.0
+    return q
+
+
+
 def detect_grid(values: np.ndarray) -> float | None:
     """Quantization step of a signal whose values sit on ``k * step``, or None.
 
-    The smallest non-zero sample-to-sample change gives a first step; it is refined by least
-    squares over the changes and then over the values (large multiples pin the step down to a
-    relative precision far below ``GRID_TOLERANCE / max|k|``). The grid is accepted when every
-    value lies within ``GRID_TOLERANCE`` of a multiple.
+    Two first guesses of the step, each refined by least squares over the changes and then
+    over the values (large multiples pin the step down to a relative precision far below
+    ``GRID_TOLERANCE / max|k|``) and accepted when every value lies within ``GRID_TOLERANCE`` of
+    a multiple: the smallest change (it survives printing, which moves values by a small
+    fraction of a step and gives the printed digits a grid of their own), then the common
+    divisor of the changes (:func:`grid_step`: a fast motion has no one-step change).
 
     Parameters
     ----------
@@ -123,7 +171,7 @@ def detect_grid(values: np.ndarray) -> float | None:
     Returns
     -------
     float or None
-        The step, or None when the signal never changes or is not on a grid.
+        The step, or None when the signal never changes or is not on a grid through zero.
     """
     values = np.asarray(values, dtype=np.float64)
     changes = np.abs(np.diff(values))
@@ -132,9 +180,16 @@ def detect_grid(values: np.ndarray) -> float | None:
     changes = changes[changes > 64 * np.finfo(np.float64).eps * max(scale, np.finfo(np.float64).tiny)]
     if changes.size == 0:
         return None
-    step = float(changes.min())
-    if scale / step > 2.0**50:
-        return None
+    for first in (float(changes.min()), grid_step(values)):
+        if first > 0.0 and scale / first <= 2.0**50:
+            step = _anchored_step(values, changes, first)
+            if step is not None:
+                return step
+    return None
+
+
+def _anchored_step(values, changes, step):
+    """``step`` refined over the changes and the values, if every value sits on its grid."""
     multiples = np.rint(changes / step)
     step = float(changes.sum() / multiples.sum())
     for _ in range(2):

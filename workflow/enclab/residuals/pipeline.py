@@ -188,7 +188,7 @@ def sensor_floor(truth, measured, step, truth_step, *, declared_step=None, offse
     """What limits the measured channel, and the grid the effect library analyses it on.
 
     The channel's grid is its counts step, else ``declared_step``, else the grid its values sit
-    on (:func:`enclab.residuals.select.estimate_grid_step`), else none. A float truth's grid is
+    on (:func:`enclab.core.ingest.grid_step`), else none. A float truth's grid is
     found the same way (a grid coarser than the measured one is a coincidence of the motion,
     not a truth grid, and is ignored); two grids within 0.1 % of each other are one grid
     (one 1/32-unit grid written with a few digits). The floor is
@@ -214,15 +214,15 @@ def sensor_floor(truth, measured, step, truth_step, *, declared_step=None, offse
     ValueError
         When the truth's grid is coarser than the measured channel's (``where`` names them).
     """
+    from enclab.core.ingest import grid_step
     from enclab.residuals import diagnostics as dg
-    from enclab.residuals.select import estimate_grid_step
 
     grid = step if step is not None else (float(declared_step) if declared_step is not None else None)
     if grid is None:
-        est = estimate_grid_step(measured)
+        est = grid_step(measured)
         grid = est if est > 0 else None
     if truth_step is None:
-        est = estimate_grid_step(truth)
+        est = grid_step(truth)
         truth_step = est if est > 0 and (grid is None or est <= grid * (1.0 + 1e-3)) else None
     if grid is not None and truth_step is not None and truth_step > grid:
         if truth_step > grid * (1.0 + 1e-3):

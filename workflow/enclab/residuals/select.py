@@ -132,9 +132,10 @@ import numpy as np
 from scipy import interpolate, optimize, signal, stats
 from scipy.special import log_ndtr, ndtr
 
+from enclab.core.ingest import grid_step
 from enclab.residuals import effects as fx
 
-__all__ = ["select_effects", "SelectionResult", "FittedEffect", "residual_stats", "estimate_grid_step"]
+__all__ = ["select_effects", "SelectionResult", "FittedEffect", "residual_stats"]
 
 METRIC = "std of (measured - exact-model prediction)"
 _LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
@@ -1059,50 +1060,6 @@ class SelectionResult:
         }
 
 
-def estimate_grid_step(x, rtol: float = 1e-8) -> float:
-    """The grid step of a quantized signal (the common divisor of all its jumps), or 0.
-
-    The step is the real greatest common divisor of the sample-to-sample jumps (Euclid's
-    algorithm on the distinct jump sizes, remainders below ``rtol * max|x|`` taken as zero),
-    refined by least squares over every jump. It need not be the smallest jump: a fast motion
-    (a rotating axis moving 32 or 33 truth steps per sample) has no jump of one step. ``rtol``
-    admits the rounding of values written with 9 significant digits far from zero (60 rad of a
-    10-turn log). Returns 0 when the jumps have no common divisor well above that tolerance
-    and no more than 2**20 times below the largest jump (a continuous channel).
-    """
-    x = np.asarray(x, float)
-    d = np.abs(np.diff(x))
-    scale = max(float(np.max(np.abs(x))), 1e-300)
-    tol = max(rtol * scale, 1e3 * np.finfo(float).eps * scale)
-    d = d[d > tol]
-    if d.size == 0:
-        return 0.0
-    sizes = np.sort(d)
-    # distinct jump sizes (within the tolerance), largest first
-    distinct = sizes[np.concatenate(([True], np.diff(sizes) > 2.0 * tol))][::-1]
-    q = float(distinct[0])
-    for b in distinct[1:]:
-        a, b = max(q, float(b)), min(q, float(b))
-        # nearest-integer Euclid; the rounding error of a remainder grows with the quotient
-        # (a - n b carries n times b's error), so "zero" is judged against that
-        while True:
-            n = round(a / b)
-            rem = abs(a - n * b)
-            if rem <= 2.0 * tol * (1.0 + n):
-                break
-            a, b = b, rem
-            if b <= 10.0 * tol:
-                return 0.0
-        q = b
-    n = np.round(d / q)
-    if q <= 10.0 * tol or float(np.max(n)) > 2.0**20:
-        return 0.0
-    q = float(np.dot(d, n) / np.dot(n, n))
-    if np.max(np.abs(d / q - n)) > 0.01:
-        return 0.0
-    return q
-
-
 def _smoothed_velocity(t, truth, truth_step):
     """Velocity of the truth (Savitzky-Golay, 21 samples, quadratic) and a dead zone below it.
 
@@ -1286,7 +1243,7 @@ def select_effects(
         Quantization step of the measured channel (rad).
     truth_step : float or None
         Quantization step of the truth channel; None estimates it from the truth's grid
-        (:func:`estimate_grid_step`, 0 for a continuous truth).
+        (:func:`enclab.core.ingest.grid_step`, 0 for a continuous truth).
     aux : dict, optional
         Extra channels, e.g. ``{"torque": array}`` (enables the compliance effect).
     seed : int
@@ -1353,7 +1310,7 @@ def select_effects(
     if not (isinstance(heldout_blocks, int) and heldout_blocks >= 2):
         raise ValueError(f"heldout_blocks must be an integer >= 2, got {heldout_blocks!r}")
     if truth_step is None:
-        truth_step = estimate_grid_step(truth)
+        truth_step = grid_step(truth)
     # Edge transients (a channel that lags for its first samples, a logger that stops mid-move)
     # are cropped, not modelled: found on the exact-model residual of the base model.
     kept = slice(0, t.size)
