@@ -1,6 +1,6 @@
-"""How fast and how lean are the paper-000 stages, against reading the same file?
+"""How fast and how lean are the quantization-error stages, against reading the same file?
 
-Throughput, time and peak memory of the paper-000 stages, against reading the same file.
+Throughput, time and peak memory of the quantization-error stages, against reading the same file.
 
 In ONE run this script
 

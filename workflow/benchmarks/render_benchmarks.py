@@ -41,7 +41,7 @@ from .helpers import PROVENANCE, ROOT, module_command, rerun_command
 TABLES = [
     ("first_run.csv", "First run",
      "`make run` and `make test` on a fresh clone, install included."),
-    ("performance.csv", "Throughput of the paper-000 stages",
+    ("performance.csv", "Quantization error: throughput of the stages",
      "Per-stage throughput, time as a ratio to `pyarrow` reading the same file (same run), peak "
      "memory of the streamed long-log path (`bench_performance.py`), the per-log cost of "
      "Snakemake jobs in a batch (`bench_batch.py`), and the peak memory of the whole workflow on "
