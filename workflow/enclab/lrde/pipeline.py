@@ -53,6 +53,7 @@ import numpy as np
 import pandas as pd
 
 from enclab.core import parallel
+from enclab.core.canonical import Channel
 from enclab.lrde import compare, dwell, fit, plots, report
 from enclab.lrde import effects as lrde_effects
 from enclab.lrde import loop as lrde_loop
@@ -72,13 +73,6 @@ _KNOWN_SETTINGS = {"channel", "requantize", "use_truth", "rest_position", "f_hz"
                    "n_walkers", "n_steps", "max_steps", "n_burn", "ppc_draws", "sigma_range_steps",
                    "sigma_prior", "motion_models", "effects", "effect_pairs", "trust_z",
                    "local_z", "loop_models"}
-
-
-def _angle(df: pd.DataFrame, channel: dict) -> np.ndarray:
-    values = df[channel["name"]].to_numpy()
-    if channel.get("storage") == "counts":
-        return values.astype(float) * float(channel["step"])
-    return values.astype(float)
 
 
 def _sampler_settings(settings: dict) -> dict:
@@ -148,7 +142,7 @@ def select_command(df: pd.DataFrame, meta: dict, info: dict):
     joint = measured[0].get("joint") if measured else None
     commands = [ch for ch in channels if ch.get("role") == "command"
                 and (joint is None or ch.get("joint") == joint)]
-    return _angle(df, commands[0]) if commands else None
+    return Channel.of(commands[0], df).values if commands else None
 
 
 def _loop_model_block(model_block: dict, loop_cmp: dict) -> dict:
@@ -199,15 +193,15 @@ def select_channels(df: pd.DataFrame, meta: dict, settings: dict):
         same_joint = [ch for ch in truths if ch.get("joint") == measured.get("joint")]
         truths = same_joint or truths
     truth_ch = truths[0] if truths else None
-    truth = _angle(df, truth_ch) if truth_ch is not None else None
-    truth_step = (float(truth_ch["step"]) if truth_ch is not None
-                  and truth_ch.get("storage") == "counts" and truth_ch.get("step") else None)
+    truth_channel = Channel.of(truth_ch, df) if truth_ch is not None else None
+    truth = truth_channel.values if truth_channel is not None else None
+    truth_step = truth_channel.step if truth_channel is not None and truth_channel.step else None
     if measured is not None:
         if measured.get("storage") != "counts" or not measured.get("step"):
             raise ValueError(f"measured channel {measured['name']!r} must be stored as counts "
                              f"with a step, got storage={measured.get('storage')!r}")
-        counts = df[measured["name"]].to_numpy().astype(np.int64)
-        return counts, float(measured["step"]), truth, {
+        coarse = Channel.of(measured, df)
+        return coarse.counts.astype(np.int64), coarse.step, truth, {
             "measured": measured["name"], "truth": truth_ch and truth_ch["name"],
             "requantized": False, "truth_step": truth_step}
     req = settings.get("requantize")
