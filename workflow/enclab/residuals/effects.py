@@ -1,4 +1,4 @@
-"""Effect library: composable terms of the measured-channel model (docs/output-contract.md).
+"""Effect library: composable terms of the measured-channel model (method: docs/residuals.md).
 
 The measured channel with step ``step`` reads the count ``k = floor(theta_eff / step + c)``
 of an *effective* angle ``theta_eff``: the truth angle changed by the effects below, in the

@@ -1263,7 +1263,7 @@ def select_effects(
         Line pitch (rad) of the line-pitch harmonics; default four measured steps.
     stop_at_floor : bool
         After an effect was added, stop as soon as the residual std is within the floor's
-        interval (the stop rule of docs/output-contract.md). False tries further candidates
+        interval (the stop rule of docs/residuals.md). False tries further candidates
         anyway (the selection then ends only when none passes).
     distinguish_bic : float or None
         Margin of the swap-in ``delta_bic`` below which an alternative is reported as not
