@@ -23,7 +23,7 @@ t0=$(now)
 bash "$HERE/cluster.sh" install
 t_install=$(($(now) - t0))
 
-WORK=$(mktemp -d /tmp/enclab-test-slurm.XXXXXX)
+WORK=$(mktemp -d -t enclab-test-slurm.XXXXXX)
 status=1
 cleanup() {
     bash "$HERE/cluster.sh" stop "$WORK/cluster" || true

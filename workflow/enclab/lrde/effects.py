@@ -95,22 +95,28 @@ class Effect:
     #: start value of the parameter (internal units)
     start = 0.0
 
+    # The four methods below describe a sampled parameter: every term with ``sampled = True``
+    # defines them; a marginalised term (``sampled = False``, the count jump) has none to give.
+
+    def _no_parameter(self):
+        return NotImplementedError(f"{self.name!r} has no sampled parameter")
+
     def bounds(self, duration: float, dt: float) -> list:
         """Internal prior bounds ``[lo, hi]`` of the parameter for a log of ``duration`` s
         sampled every ``dt`` s."""
-        raise NotImplementedError
+        raise self._no_parameter()
 
     def si_scale(self, step: float, dt: float) -> float:
         """SI value of one internal unit of the parameter."""
-        raise NotImplementedError
+        raise self._no_parameter()
 
     def start_spread(self, duration: float, ratio: float) -> float:
         """Dispersion of the ensemble's start (internal units, before the common shrink)."""
-        raise NotImplementedError
+        raise self._no_parameter()
 
     def simplex_step(self, duration: float) -> float:
         """First step of the point fit's simplex (internal units)."""
-        raise NotImplementedError
+        raise self._no_parameter()
 
     def derived(self, summary: Mapping, duration_s: float | None) -> dict:
         """Extra reported quantities from the fitted parameter's ``{median, q05, q95}``."""
