@@ -20,10 +20,12 @@ channel     the reference declared as a ``command`` channel (the loop structures
 and, drawn per log, the encoder offset ``a ~ U(0, step)``, the reference amplitude
 ``U(1, 3)`` steps (2 to 6 steps peak to peak) and the position noise (0 or 0.02 step, seen by
 the encoder only). The loop's pull-in (the first 30 cycles) is left out of the log, and a fine
-rounding channel of step/100 reads the motion.
+rounding channel of step/100 reads the motion (the stage's truth channel).
 
-The fine channel's values are those of the docs' definitions for a motion that is not a
-sinusoid: ``A12`` the mean over the log's cycles (of the reference) of ``max - min`` of the
+The true values are those of the docs' definitions for a motion that is not a sinusoid,
+taken on the simulated angle at the sample instants (not on the fine channel: its rounding,
+up to a hundredth of a step per turning point, does not average out over the cycles of a
+motion that repeats exactly): ``A12`` the mean over the log's cycles (of the reference) of ``max - min`` of the
 true angle (and, recorded beside it, ``max - min`` of the cycle-averaged true angle, the
 stroke of the periodic part a periodic model describes), the bias ``b`` the mean of
 ``(max + min) / 2``, and ``E_b = a + b - (m + 1/2) step`` in the frame of the fit's centre
@@ -31,7 +33,7 @@ count ``m`` (with a missed count the counter's offset after it, so that both seg
 the readings' frame). Per draw the stage runs as
 ``make run`` runs it (:func:`enclab.lrde.pipeline.analyse_lrde_log`, the ``lrde`` settings of
 ``config.yaml``, 2 processes) and records the chosen model, whether its 90 % intervals of
-``A12`` and ``E_b`` hold the fine channel's values, whether the stage flags them untrusted,
+``A12`` and ``E_b`` hold the true values, whether the stage flags them untrusted,
 and its wall time beside a 5M-iteration Python loop timed just before it (the machine's
 speed at that moment). A log "the model describes" is one without an encoder effect whose motion
 repeats from cycle to cycle (standard deviations of the per-cycle stroke and bias below 0.05
@@ -87,7 +89,7 @@ def simulate_log(rng, gains, effect, n_cycles, command=True):
                                          ki=ki, noise_std=noise, truth_step=FINE, **kw)
     keep = df["t"].to_numpy() >= PULL_IN / F_HZ
     t = df["t"].to_numpy()[keep]
-    theta = df["truth_counts"].to_numpy()[keep] * FINE
+    theta = df["theta"].to_numpy()[keep]
     a_eff = np.full(t.size, p["offset_a"])
     if p["missed_count"] is not None:
         index, delta = p["missed_count"]

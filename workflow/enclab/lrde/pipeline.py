@@ -364,7 +364,7 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
                 t, counts, command, step, fit_loop_seed, loop_cmp["chosen"],
                 start=loop_cmp["fits"][loop_cmp["chosen"]],
                 n_ensembles=sampler["n_ensembles"], max_steps=max(sampler["max_steps"], 250),
-                truth=common["truth"], truth_step=common["truth_step"])
+                truth=common["truth"], truth_step=common["truth_step"], threads=threads)
     # Models the held-out comparison cannot tell from the pick (or, when it keeps the
     # sinusoid, does not rule out): their posteriors are pooled with the pick's (equal
     # weights), so the reported intervals do not hang on the pick.
