@@ -83,3 +83,38 @@ def test_fit_recovers_the_fine_channels_stroke_and_bias():
         assert q["q05"] - width <= true <= q["q95"] + width, (name, true, q)
     a = res.summary["offset_a"]
     assert a["q05"] - (a["q95"] - a["q05"]) <= prm["offset_a"] <= a["q95"] + (a["q95"] - a["q05"])
+
+
+@pytest.mark.slow
+def test_stage_with_a_command_channel_reports_the_loop_fit():
+    # A closed-loop log with its reference declared as a command channel: the loop structure
+    # replaces the periodic pick, its posterior is the reported one (converged, as every
+    # ensemble starts at the point fit), the periodic pick is not sampled, and the stroke's
+    # interval holds the simulated angle's per-cycle stroke within one width (a miss by more
+    # is a bias, not the 1-in-10 of a calibrated interval).
+    df, prm = simulate.closed_loop_pid_log(np.random.default_rng(7), n_cycles=50,
+                                           noise_std=0.02 * STEP, truth_step=STEP / 100)
+    df = df.iloc[3000:].reset_index(drop=True)
+    df["t"] -= df["t"].iloc[0]
+    meta = {"log_id": "loop", "channels": [
+        {"name": "counts", "role": "measured", "joint": 1, "unit": "counts",
+         "storage": "counts", "step": STEP},
+        {"name": "truth_counts", "role": "truth", "joint": 1, "unit": "counts",
+         "storage": "counts", "step": STEP / 100},
+        {"name": "reference", "role": "command", "joint": 1, "unit": "rad",
+         "storage": "float", "step": None}]}
+    settings = {"n_ensembles": 4, "n_walkers": 16, "n_steps": 250, "max_steps": 1000,
+                "n_burn": 100, "effects": [], "effect_pairs": False}
+    block, figures, _, _ = pipeline.analyse_lrde_log(df, meta, 3, settings, threads=2)
+    assert block["model"]["chosen"] in loop.STRUCTURES
+    assert block["model"]["periodic"]["params"] == {}
+    assert block["diagnostics"]["converged"]
+    assert "averaged" not in block
+    ref = df["reference"].to_numpy()
+    top, bottom = loop._cycle_extremes(df["theta"].to_numpy()[None, :],
+                                       loop.reference_cycles(ref))
+    stroke = float((top - bottom).mean())
+    q = block["A12"]
+    width = q["q95"] - q["q05"]
+    assert q["q05"] - width <= stroke <= q["q95"] + width, (stroke, q)
+    assert set(figures) == {"corner", "dwell_ppc", "bias_cycles", "misfit"}

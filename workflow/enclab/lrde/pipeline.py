@@ -267,8 +267,9 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
     threads : int
         Processes for the comparison's point fits and the emcee fits: with 2 or more, the
         candidates' fits run side by side, and so do the paper's sinusoid (``before``), the
-        final model (``after``) and the pooled alternatives (each depends only on the
-        comparison and its own seed, so the results are the same as with 1).
+        final model (``after``) and the pooled alternatives, and the loop model's
+        ensembles (each depends only on the comparison and its own seed, so the results are
+        the same as with 1).
 
     Returns
     -------
@@ -318,34 +319,10 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
               "rest_position": settings.get("rest_position"), **_sampler_settings(settings)}
     before_kw = {"start": None if comparison is None
                  else comparison["full_fits"]["sinusoid"]["x"], **common}
-    point, after_kw = None, None
-    if added:
-        # The truth channel saw an effect the readings alone did not resolve: the final
-        # model is the comparison's choice plus that effect, from its own optimum.
-        point = fit.map_fit(t, counts, step, f_hz=f_hz, harmonics=harmonics,
-                            effects=chosen + tuple(added),
-                            start=None if comparison is None
-                            else comparison["full_fits"][comparison["chosen"]]["x"],
-                            sigma_range=settings.get("sigma_range_steps"),
-                            sigma_prior=settings.get("sigma_prior", "uniform"))
-    elif harmonics or chosen:
-        point = comparison["full_fits"][comparison["chosen"]]
-    alternatives = _alternative_kwargs(t, counts, step, comparison, added, common, settings)
-    jobs = [(fit_seed, before_kw)]
-    jobs += list(zip(alternatives_seed.spawn(len(alternatives)), alternatives))
-    if point is not None:
-        after_kw = {"harmonics": harmonics, "effects": chosen + tuple(added),
-                    "start": point["x"], **common}
-        jobs.append((after_seed, after_kw))
-    try:
-        fits = _run_fits(t, counts, step, jobs, threads)
-    except ValueError as err:
-        raise ValueError(f"{where}: {err}") from err
-    result = fits[0]
-    chosen_fit = fits[-1] if after_kw is not None else None
     # With a declared command or reference channel, the loop structures (the angle as the
     # logged error through a low-order filter) enter the held-out comparison against the
-    # periodic pick; a winning structure's posterior gives the reported estimates.
+    # periodic pick; a winning structure's posterior gives the reported estimates, and the
+    # periodic pick's own posterior and its alternatives are then not sampled.
     command = select_command(df, meta, info)
     structures = list(settings.get("loop_models", list(lrde_loop.STRUCTURES)))
     loop_cmp = loop_fit = None
@@ -358,13 +335,40 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
                 seed=compare_loop_seed, threads=threads)
         except ValueError as err:
             raise ValueError(f"{where}: {err}") from err
-        if loop_cmp["chosen"] is not None:
-            sampler = _sampler_settings(settings)
-            loop_fit = lrde_loop.fit_loop(
-                t, counts, command, step, fit_loop_seed, loop_cmp["chosen"],
-                start=loop_cmp["fits"][loop_cmp["chosen"]],
-                n_ensembles=sampler["n_ensembles"], max_steps=max(sampler["max_steps"], 250),
-                truth=common["truth"], truth_step=common["truth_step"], threads=threads)
+    loop_chosen = loop_cmp is not None and loop_cmp["chosen"] is not None
+    point, after_kw = None, None
+    if added and not loop_chosen:
+        # The truth channel saw an effect the readings alone did not resolve: the final
+        # model is the comparison's choice plus that effect, from its own optimum.
+        point = fit.map_fit(t, counts, step, f_hz=f_hz, harmonics=harmonics,
+                            effects=chosen + tuple(added),
+                            start=None if comparison is None
+                            else comparison["full_fits"][comparison["chosen"]]["x"],
+                            sigma_range=settings.get("sigma_range_steps"),
+                            sigma_prior=settings.get("sigma_prior", "uniform"))
+    elif (harmonics or chosen) and not loop_chosen:
+        point = comparison["full_fits"][comparison["chosen"]]
+    alternatives = ([] if loop_chosen else
+                    _alternative_kwargs(t, counts, step, comparison, added, common, settings))
+    jobs = [(fit_seed, before_kw)]
+    jobs += list(zip(alternatives_seed.spawn(len(alternatives)), alternatives))
+    if point is not None:
+        after_kw = {"harmonics": harmonics, "effects": chosen + tuple(added),
+                    "start": point["x"], **common}
+        jobs.append((after_seed, after_kw))
+    try:
+        fits = _run_fits(t, counts, step, jobs, threads)
+    except ValueError as err:
+        raise ValueError(f"{where}: {err}") from err
+    result = fits[0]
+    chosen_fit = fits[-1] if after_kw is not None else None
+    if loop_chosen:
+        sampler = _sampler_settings(settings)
+        loop_fit = lrde_loop.fit_loop(
+            t, counts, command, step, fit_loop_seed, loop_cmp["chosen"],
+            start=loop_cmp["fits"][loop_cmp["chosen"]],
+            n_ensembles=sampler["n_ensembles"], max_steps=max(sampler["max_steps"], 250),
+            truth=common["truth"], truth_step=common["truth_step"], threads=threads)
     # Models the held-out comparison cannot tell from the pick (or, when it keeps the
     # sinusoid, does not rule out): their posteriors are pooled with the pick's (equal
     # weights), so the reported intervals do not hang on the pick.
