@@ -34,12 +34,14 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import emcee
 import numpy as np
 from scipy.optimize import minimize
 from scipy.signal import lfilter
 
+from enclab.core import parallel
 from enclab.lrde import effects as lrde_effects
 from enclab.lrde import fit as lrde_fit
 
@@ -288,14 +290,23 @@ def _names(taps):
             + tuple(f"w_tap{k}" for k in range(1, taps + 1)) + ("w_lag", "w_transient"))
 
 
+class _EnsembleRun(NamedTuple):
+    """A stretch of one ensemble's chain and what continues it."""
+
+    chain: np.ndarray  # (steps, walkers, ndim)
+    coords: np.ndarray
+    log_prob: np.ndarray
+    random: np.random.RandomState
+    sampler_state: tuple
+    accepted: np.ndarray  # accepted moves per walker
+
+
 def _sample_ensemble(coords, random, n_steps, cols, counts, bounds, log_prob=None,
-                     sampler_state=None):
+                     sampler_state=None) -> _EnsembleRun:
     """``n_steps`` of one ensemble (differential evolution) from ``coords`` (walkers x ndim).
 
-    Returns ``(chain, coords, log_prob, random, sampler_state, accepted)``: the chain
-    (steps, walkers, ndim), what continues it and the accepted moves per walker. An ensemble
-    draws only from its own random states, so it runs the same alone or beside others, in
-    this process or a forked one.
+    An ensemble draws only from its own random states, so it runs the same alone or beside
+    others, in this process or a forked one.
     """
     sampler = emcee.EnsembleSampler(
         coords.shape[0], coords.shape[1], _log_post, args=(cols, counts, bounds),
@@ -303,8 +314,8 @@ def _sample_ensemble(coords, random, n_steps, cols, counts, bounds, log_prob=Non
         moves=[(lrde_fit._EnsemblesMove(m, [random]), w) for m, w in lrde_fit._MOVES["de"]()])
     state = emcee.State(coords, log_prob=log_prob, random_state=sampler_state)
     last = sampler.run_mcmc(state, int(n_steps), progress=False)
-    return (sampler.get_chain(), last.coords, last.log_prob, random, last.random_state,
-            sampler.acceptance_fraction * n_steps)
+    return _EnsembleRun(sampler.get_chain(), last.coords, last.log_prob, random,
+                        last.random_state, sampler.backend.accepted.copy())
 
 
 def fit_loop(t, counts, reference, step, seed, structure="loop-pi", start=None, n_ensembles=4,
@@ -322,8 +333,6 @@ def fit_loop(t, counts, reference, step, seed, structure="loop-pi", start=None, 
     ``truth`` (rad, a fine channel) gives the bias ``b``: the mean over the reference's
     cycles of its turning points' midpoint, widened by half its rounding step; ``a = a_eq - b``.
     """
-    from enclab.core import parallel
-
     started = time.perf_counter()
     t = np.asarray(t, dtype=float)
     counts = lrde_fit._check_int_counts(counts, t.size)
@@ -353,8 +362,8 @@ def fit_loop(t, counts, reference, step, seed, structure="loop-pi", start=None, 
         sampler_state = np.random.RandomState(int(rng.integers(2**32))).get_state()
         jobs.append((p0, random, n_burn + n_steps, cols, counts, bounds, None, sampler_state))
     runs = parallel.map_forked(_sample_ensemble, jobs, threads)
-    chains = [run[0][n_burn:] for run in runs]
-    accepted = sum(run[5] for run in runs)
+    chains = [run.chain[n_burn:] for run in runs]
+    accepted = sum(run.accepted for run in runs)
     kept = n_steps
     while True:
         internal = np.stack(chains)  # (ensembles, steps, walkers, ndim)
@@ -364,10 +373,10 @@ def fit_loop(t, counts, reference, step, seed, structure="loop-pi", start=None, 
             break
         more = min(n_steps, max_steps - kept)
         runs = parallel.map_forked(_sample_ensemble, [
-            (coords, random, more, cols, counts, bounds, log_prob, state)
-            for _, coords, log_prob, random, state, _ in runs], threads)
-        chains = [np.concatenate((c, run[0])) for c, run in zip(chains, runs)]
-        accepted = accepted + sum(run[5] for run in runs)
+            (run.coords, run.random, more, cols, counts, bounds, run.log_prob,
+             run.sampler_state) for run in runs], threads)
+        chains = [np.concatenate((c, run.chain)) for c, run in zip(chains, runs)]
+        accepted = accepted + sum(run.accepted for run in runs)
         kept += more
     rows = internal.reshape(-1, ndim)
     cycles = reference_cycles(reference)
@@ -452,7 +461,6 @@ def compare_loop_models(t, counts, reference, step, comparison, structures=tuple
     and, for a chosen structure, ``check`` (:func:`predictive_check`, ``trusted`` when
     ``z >= trust_z``).
     """
-    from enclab.core import parallel
     from enclab.lrde import compare as lrde_compare
 
     t = np.asarray(t, dtype=float)

@@ -336,20 +336,21 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
         except ValueError as err:
             raise ValueError(f"{where}: {err}") from err
     loop_chosen = loop_cmp is not None and loop_cmp["chosen"] is not None
-    point, after_kw = None, None
-    if added and not loop_chosen:
-        # The truth channel saw an effect the readings alone did not resolve: the final
-        # model is the comparison's choice plus that effect, from its own optimum.
-        point = fit.map_fit(t, counts, step, f_hz=f_hz, harmonics=harmonics,
-                            effects=chosen + tuple(added),
-                            start=None if comparison is None
-                            else comparison["full_fits"][comparison["chosen"]]["x"],
-                            sigma_range=settings.get("sigma_range_steps"),
-                            sigma_prior=settings.get("sigma_prior", "uniform"))
-    elif (harmonics or chosen) and not loop_chosen:
-        point = comparison["full_fits"][comparison["chosen"]]
-    alternatives = ([] if loop_chosen else
-                    _alternative_kwargs(t, counts, step, comparison, added, common, settings))
+    point, after_kw, alternatives = None, None, []
+    if not loop_chosen:
+        if added:
+            # The truth channel saw an effect the readings alone did not resolve: the final
+            # model is the comparison's choice plus that effect, from its own optimum.
+            point = fit.map_fit(t, counts, step, f_hz=f_hz, harmonics=harmonics,
+                                effects=chosen + tuple(added),
+                                start=None if comparison is None
+                                else comparison["full_fits"][comparison["chosen"]]["x"],
+                                sigma_range=settings.get("sigma_range_steps"),
+                                sigma_prior=settings.get("sigma_prior", "uniform"))
+        elif harmonics or chosen:
+            point = comparison["full_fits"][comparison["chosen"]]
+        alternatives = _alternative_kwargs(t, counts, step, comparison, added, common,
+                                           settings)
     jobs = [(fit_seed, before_kw)]
     jobs += list(zip(alternatives_seed.spawn(len(alternatives)), alternatives))
     if point is not None:
