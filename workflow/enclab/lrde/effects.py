@@ -25,7 +25,8 @@ __all__ = ["Effect", "Hysteresis", "Drift", "CountJump", "TimeJitter", "REGISTRY
            "effect", "active", "parameter_column", "offsets_counts",
            "n_marginalised", "check_effects", "effect_param_names", "effect_bounds",
            "effect_scales", "pointwise_log_likelihood", "log_likelihood", "jump_posterior",
-           "simulate_counts", "effect_signature", "model_label"]
+           "simulate_counts", "effect_signature", "model_label", "dead_band_bounds",
+           "jump_log_terms", "jump_offsets", "relay", "JUMP_SIGNS"]
 
 # Internal bounds: hysteresis in steps (a dead band above half a step would swallow the
 # narrowest dwell of a 2n-step pattern), time jitter in sample intervals, drift as a total
@@ -33,6 +34,7 @@ __all__ = ["Effect", "Hysteresis", "Drift", "CountJump", "TimeJitter", "REGISTRY
 _HYST_MAX = 0.5
 _JITTER_MAX = 1.0
 _DRIFT_MAX = 0.1
+JUMP_SIGNS = (1, -1)  # a count jump's offsets of the shorter segment
 _RELAY_ROWS_VECTOR = 16  # from this many simulated readings on, the relay runs vectorised
 
 
@@ -571,23 +573,61 @@ def _interval_bounds(p, t, counts, centre_count, t_ref, harmonics, effects, offs
     else:
         inv_s = 10.0 ** -log_s
     if band_col is not None:
-        # Previous reading c: k > c reads [k + w/2, k + 1 + w/2), k < c [k - w/2, k + 1 - w/2),
-        # k = c [k - w/2, k + 1 + w/2).
-        half_w = 0.5 * p[:, band_col:band_col + 1]
         prev = _previous(counts, prev_counts) - offset
-        lo_sign = np.where(k > prev, 1.0, -1.0)
-        hi_sign = np.where(k < prev, -1.0, 1.0)
-        lower = half_w * lo_sign
-        lower -= zk
-        upper = half_w * hi_sign
-        upper += 1.0
-        upper -= zk
+        lower, upper = dead_band_bounds(zk, k, prev, 0.5 * p[:, band_col:band_col + 1])
     else:
         lower = -zk
         upper = 1.0 - zk
     lower *= inv_s
     upper *= inv_s
     return lower, upper
+
+
+def dead_band_bounds(zk, k, prev, half_w):
+    """Bounds ``(lower, upper)`` of a reading's interval less the motion, ``z - k`` given
+    (steps, not yet standardised), for a relay with dead band ``2 half_w`` whose previous
+    reading is ``prev``.
+
+    Previous reading c: ``k > c`` reads ``[k + w/2, k + 1 + w/2)``, ``k < c``
+    ``[k - w/2, k + 1 - w/2)``, ``k = c`` ``[k - w/2, k + 1 + w/2)``.
+    """
+    lo_sign = np.where(k > prev, 1.0, -1.0)
+    hi_sign = np.where(k < prev, -1.0, 1.0)
+    lower = half_w * lo_sign - zk
+    upper = half_w * hi_sign + 1.0
+    upper = upper - zk
+    return lower, upper
+
+
+def jump_log_terms(base, shifted):
+    """Log-likelihood of every jump gap from pointwise terms: ``base`` (rows, n) without an
+    offset, ``shifted`` the same with the counts offset by each sign. Returns (rows, signs,
+    n - 1): the gap ``i`` lies between samples ``i`` and ``i + 1``, and the shorter segment
+    carries the offset."""
+    n = base.shape[1]
+    c0 = np.cumsum(base, axis=1)
+    total0 = c0[:, -1:]
+    idx = np.arange(1, n)  # the jump lies between samples idx - 1 and idx
+    first_short = idx < n - idx
+    out = []
+    for one in shifted:
+        cd = np.cumsum(one, axis=1)
+        # Shorter segment offset by delta from the reference (longer) segment.
+        before_short = cd[:, idx - 1] + (total0 - c0[:, idx - 1])
+        after_short = c0[:, idx - 1] + (cd[:, -1:] - cd[:, idx - 1])
+        out.append(np.where(first_short, before_short, after_short))
+    return np.stack(out, axis=1)
+
+
+def jump_offsets(n, index, delta):
+    """Per-sample count offsets of a jump before sample ``index``: ``delta`` on the shorter
+    segment, 0 on the longer one (the reference frame)."""
+    offsets = np.zeros(int(n), dtype=np.int64)
+    if index < n - index:
+        offsets[:index] = delta
+    else:
+        offsets[index:] = delta
+    return offsets
 
 
 def pointwise_log_likelihood(params, t, counts, step, centre_count, t_ref, harmonics=(),
@@ -638,23 +678,11 @@ def _jump_terms(params, t, counts, step, centre_count, t_ref, harmonics, effects
     """Log-likelihood of every jump index and sign: array (n_rows, 2, n - 1) and the signs."""
     base = pointwise_log_likelihood(params, t, counts, step, centre_count, t_ref, harmonics,
                                     effects, grid=grid, prev_counts=prev_counts)
-    n = base.shape[1]
-    c0 = np.cumsum(base, axis=1)
-    total0 = c0[:, -1:]
-    idx = np.arange(1, n)  # the jump lies between samples idx - 1 and idx
-    first_short = idx < n - idx
-    out = []
-    signs = (1, -1)
-    for delta in signs:
-        shifted = pointwise_log_likelihood(params, t, counts, step, centre_count, t_ref,
-                                           harmonics, effects, offset=delta, grid=grid,
-                                           prev_counts=prev_counts)
-        cd = np.cumsum(shifted, axis=1)
-        # Shorter segment offset by delta from the reference (longer) segment.
-        before_short = cd[:, idx - 1] + (total0 - c0[:, idx - 1])
-        after_short = c0[:, idx - 1] + (cd[:, -1:] - cd[:, idx - 1])
-        out.append(np.where(first_short, before_short, after_short))
-    return np.stack(out, axis=1), signs
+    signs = JUMP_SIGNS
+    shifted = [pointwise_log_likelihood(params, t, counts, step, centre_count, t_ref,
+                                        harmonics, effects, offset=delta, grid=grid,
+                                        prev_counts=prev_counts) for delta in signs]
+    return jump_log_terms(base, shifted), signs
 
 
 def log_likelihood(params, t, counts, step, centre_count, t_ref, harmonics=(), effects=(),
@@ -696,13 +724,7 @@ def jump_posterior(params, t, counts, step, centre_count, t_ref, harmonics=(), e
     sign_i, gap = np.unravel_index(int(np.argmax(post)), post.shape)
     index = int(gap) + 1
     mass = float(post[sign_i, max(gap - 1, 0):gap + 2].sum())
-    n = np.size(t)
-    offsets = np.zeros(n, dtype=np.int64)
-    if index < n - index:
-        offsets[:index] = signs[sign_i]
-    else:
-        offsets[index:] = signs[sign_i]
-    return index, int(signs[sign_i]), mass, offsets
+    return index, int(signs[sign_i]), mass, jump_offsets(np.size(t), index, signs[sign_i])
 
 
 def simulate_counts(rng, t, step, A12, a_eq, f_hz, phase, t_ref=0.0, noise_std=0.0,
@@ -732,7 +754,18 @@ def simulate_counts(rng, t, step, A12, a_eq, f_hz, phase, t_ref=0.0, noise_std=0
     x = np.broadcast_to(x, (reps, t.size)).copy()
     if noise_std > 0:
         x += rng.normal(0.0, noise_std / step, x.shape)
-    half_w = 0.5 * hysteresis / step
+    out = relay(x, 0.5 * hysteresis / step)
+    if jump is not None:
+        out[:, int(jump[0]):] += int(jump[1])
+    return out[0] if n_rep is None else out
+
+
+def relay(x, half_w):
+    """Readings (int64, rows x samples) of a relay with dead band ``2 half_w`` (steps) driven
+    by ``x`` (steps, rows x samples), from the state ``floor(x_0)``; plain rounding down when
+    ``half_w`` is 0."""
+    x = np.atleast_2d(np.asarray(x, dtype=float))
+    reps = x.shape[0]
     if half_w > 0:
         out = np.empty(x.shape, dtype=np.int64)
         if reps < _RELAY_ROWS_VECTOR:
@@ -751,7 +784,7 @@ def simulate_counts(rng, t, step, A12, a_eq, f_hz, phase, t_ref=0.0, noise_std=0
         else:
             state = np.floor(x[:, 0])
             out[:, 0] = state
-            for j in range(1, t.size):
+            for j in range(1, x.shape[1]):
                 xj = x[:, j]
                 up = xj >= state + 1.0 + half_w
                 down = xj < state - half_w
@@ -760,9 +793,7 @@ def simulate_counts(rng, t, step, A12, a_eq, f_hz, phase, t_ref=0.0, noise_std=0
                 out[:, j] = state
     else:
         out = np.floor(x).astype(np.int64)
-    if jump is not None:
-        out[:, int(jump[0]):] += int(jump[1])
-    return out[0] if n_rep is None else out
+    return out
 
 
 #: Bound (standard deviations) beyond which an interval's far edge is dropped.
