@@ -3,7 +3,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from enclab.lrde import loop, pipeline, simulate
+from enclab.lrde import effects, loop, pipeline, simulate
 
 STEP = simulate.ROS_DRILL_STEP
 
@@ -11,7 +11,8 @@ STEP = simulate.ROS_DRILL_STEP
 def _theta_from_columns(df, p, taps):
     """Least squares of the true angle on the loop's columns at the pole ``p``."""
     counts = df["counts"].to_numpy()
-    cols = loop._Columns(loop.error_steps(counts, df["reference"].to_numpy(), STEP), taps)
+    cols = loop._Columns(loop.error_steps(counts, df["reference"].to_numpy(), STEP),
+                         loop.LoopFilter(taps))
     lag, trans = cols.lag(p)
     design = np.column_stack((np.ones(cols.n), cols.fixed, lag, trans))
     # From the second sample on: the pole at 0's own start (the error before the piece) acts
@@ -83,6 +84,72 @@ def test_fit_recovers_the_fine_channels_stroke_and_bias():
         assert q["q05"] - width <= true <= q["q95"] + width, (name, true, q)
     a = res.summary["offset_a"]
     assert a["q05"] - (a["q95"] - a["q05"]) <= prm["offset_a"] <= a["q95"] + (a["q95"] - a["q05"])
+
+
+def test_structure_labels_with_encoder_terms():
+    s = loop.loop_structure("loop-pid+count_jump+hysteresis")
+    assert (s.taps, s.effects) == (1, ("hysteresis", "count_jump"))
+    assert s.label == "loop-pid+hysteresis+count_jump"
+    assert loop.loop_structure("loop-pi").with_effect("hysteresis").label == "loop-pi+hysteresis"
+    assert loop._bounds(s).shape == (3 + 6 + 1, 2)  # a0, log s, p, 6 weights, the band width
+    with pytest.raises(ValueError, match="unknown loop structure"):
+        loop.loop_structure("loop-pi+drift")
+
+
+def test_dead_band_reading_probabilities_match_a_relay():
+    # One sample, a relay of half width h in state c, driven by z + s N(0, 1): the
+    # likelihood's interval probabilities of the readings c - 1, c, c + 1 against the
+    # frequencies of a simulated relay (independent code: enclab.lrde.effects.relay). 2e5
+    # draws: a probability's standard error is below 1.2e-3, the tolerance about 5 of them.
+    structure = loop.LoopFilter(0, ("hysteresis",))
+    e = np.zeros(50)
+    cols = loop._Columns(e, structure, np.zeros(50, dtype=int))
+    rng = np.random.default_rng(2)
+    for z, s, w in ((0.95, 0.08, 0.2), (0.07, 0.05, 0.3), (0.5, 0.2, 0.1)):
+        x = np.zeros(3 + 5 + 1)
+        x[0], x[1], x[-1] = z, np.log10(s), w
+        drive = z + s * rng.standard_normal(200_000)
+        # each draw is a two-sample relay from the state 0: the second reading
+        two = np.column_stack((np.full(drive.size, 0.5), drive))
+        freq = {k: float(np.mean(effects.relay(two, 0.5 * w)[:, 1] == k)) for k in (-1, 0, 1)}
+        for k in (-1, 0, 1):
+            counts = np.zeros(50)
+            counts[1] = k  # the reading after the state 0 (all weights 0: the angle is z)
+            lower, upper = loop._interval_bounds(x[None, :], cols.for_counts(counts), counts)
+            prob = float(np.exp(effects.log_interval_probability(lower[:, 1], upper[:, 1],
+                                                                  "in_place"))[0])
+            assert abs(prob - freq[k]) < 6e-3, (z, s, w, k, prob, freq[k])
+
+
+def test_count_jump_start_places_a_missed_count():
+    # A closed-loop log with one count missed at 70 % of it (the shorter segment is the later
+    # one, read one count low): the point fit of loop-pi+count_jump places the jump where the
+    # counter lost it, to within the samples between two changes of the reading, and reads
+    # the readings as well as the loop explains a log without a miss (jitter at its floor).
+    first, n_cycles = 3000, 20
+    at = first + int(0.7 * n_cycles * 100)
+    df, prm = simulate.closed_loop_pid_log(np.random.default_rng(5), n_cycles=30 + n_cycles,
+                                           offset_frac=0.4, missed_count=(at, -1))
+    df = df.iloc[first:].reset_index(drop=True)
+    t, counts, ref = df["t"].to_numpy(), df["counts"].to_numpy(), df["reference"].to_numpy()
+    m = loop.point_fit(t, counts, ref, STEP, "loop-pi+count_jump")
+    cols = loop._Columns(loop.error_steps(counts, ref, STEP), "loop-pi+count_jump", counts)
+    gaps, delta, _, offsets = loop.jump_placement(m["x"], cols, counts)
+    true_index = at - first
+    changes = np.flatnonzero(np.diff(counts)) + 1
+    before = changes[changes <= true_index].max() if np.any(changes <= true_index) else 0
+    assert delta == -1
+    assert before <= gaps[0] <= true_index + 1, (gaps, true_index, before)
+    assert offsets[-1] == -1 and offsets[0] == 0
+    plain = loop.point_fit(t, counts, ref, STEP, "loop-pi")
+    assert 10.0 ** m["x"][1] < 0.05 < 10.0 ** plain["x"][1]
+    # The sampler's marginal over the jump's window equals the marginal over every gap and
+    # sign near the point fit (the gaps left out hold below 1e-12 of the mass).
+    rows = m["x"] + 1e-4 * np.random.default_rng(0).standard_normal((16, m["x"].size))
+    full = loop._log_lik_rows(rows, cols, counts)
+    cols.jump_window = loop.jump_window(m["x"], cols, counts, margin=50)
+    assert cols.jump_window is not None and cols.jump_window.hi - cols.jump_window.lo < 400
+    np.testing.assert_allclose(loop._log_lik_rows(rows, cols, counts), full, rtol=0, atol=1e-6)
 
 
 @pytest.mark.slow

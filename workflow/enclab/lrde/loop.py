@@ -32,6 +32,7 @@ the mean over cycles of ``a + (max theta + min theta) / 2``, ``E_b = a_eq - (m +
 """
 from __future__ import annotations
 
+import copy
 import time
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -39,18 +40,25 @@ from typing import NamedTuple
 import emcee
 import numpy as np
 from scipy.optimize import minimize
+from scipy.special import logsumexp
 from scipy.signal import lfilter
 
 from enclab.core import parallel
 from enclab.lrde import effects as lrde_effects
 from enclab.lrde import fit as lrde_fit
 
-__all__ = ["STRUCTURES", "LoopFilter", "loop_structure", "error_steps", "reference_cycles",
-           "loop_columns", "point_fit", "fit_loop", "LoopFitResult", "compare_loop_models",
-           "predictive_check", "posterior_predictive_dwell"]
+__all__ = ["STRUCTURES", "LOOP_EFFECTS", "LoopFilter", "JumpPlacement", "jump_placement",
+           "jump_window", "simulate_readings", "loop_structure", "error_steps",
+           "reference_cycles", "point_fit", "fit_loop", "LoopFitResult",
+           "compare_loop_models", "predictive_check", "posterior_predictive_dwell"]
 
 #: Taps of each structure (derivative action adds a pole at 0: one tap).
 STRUCTURES = {"loop-pi": 0, "loop-pid": 1}
+#: Encoder terms a loop structure's readings can carry (:mod:`enclab.lrde.effects`): the
+#: reading's dead band (a sampled width, steps) and one missed or extra count (marginalised
+#: over where and which way). Either one acts inside the loop too, since the controller acts on
+#: the reading, but the logged error already holds what it did to the motion.
+LOOP_EFFECTS = ("hysteresis", "count_jump")
 _P_BOUNDS = (0.02, 0.995)  # the plant's discrete pole exp(-dt / tau)
 _P_GRID = np.exp(-1.0 / np.array([0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0]))  # tau / dt
 # The jitter's lower bound is a hundredth of a step. Below it the readings' edges are hard,
@@ -64,40 +72,65 @@ _W_BOUND = 1e3  # the coefficients' prior box (steps per unit column): wide, onl
 
 
 class LoopFilter:
-    """A loop structure: the filter from the logged error to the angle (see the module)."""
+    """A loop structure: the filter from the logged error to the angle (see the module) and
+    the encoder terms of its readings (:data:`LOOP_EFFECTS`)."""
 
-    def __init__(self, taps: int = 0) -> None:
+    def __init__(self, taps: int = 0, effects=()) -> None:
         if isinstance(taps, bool) or not isinstance(taps, (int, np.integer)) or taps < 0:
             raise ValueError(f"taps must be a non-negative integer, got {taps!r}")
         self.taps = int(taps)
+        unknown = [e for e in effects if e not in LOOP_EFFECTS]
+        if unknown:
+            raise ValueError(f"loop structures take the encoder terms {list(LOOP_EFFECTS)}, "
+                             f"got {unknown}")
+        self.effects = tuple(e for e in LOOP_EFFECTS if e in effects)
+
+    @property
+    def base(self) -> str:
+        names = {v: k for k, v in STRUCTURES.items()}
+        return names.get(self.taps, f"loop-taps{self.taps}")
 
     @property
     def label(self) -> str:
-        names = {v: k for k, v in STRUCTURES.items()}
-        return names.get(self.taps, f"loop-taps{self.taps}")
+        return "+".join((self.base,) + self.effects)
+
+    @property
+    def dead_band(self) -> bool:
+        return "hysteresis" in self.effects
+
+    @property
+    def count_jump(self) -> bool:
+        return "count_jump" in self.effects
 
     @property
     def n_coefficients(self) -> int:
         """Linear coefficients: ramp, transient, I2, I1, lag and the taps."""
         return 5 + self.taps
 
+    def with_effect(self, name) -> "LoopFilter":
+        return LoopFilter(self.taps, self.effects + (name,))
+
     def __eq__(self, other) -> bool:
-        return isinstance(other, LoopFilter) and other.taps == self.taps
+        return (isinstance(other, LoopFilter) and other.taps == self.taps
+                and other.effects == self.effects)
 
     def __hash__(self) -> int:
-        return hash(("LoopFilter", self.taps))
+        return hash(("LoopFilter", self.taps, self.effects))
 
     def __repr__(self) -> str:
         return f"LoopFilter({self.label!r})"
 
 
 def loop_structure(spec) -> LoopFilter:
-    """A structure from its label (``loop-pi``, ``loop-pid``) or itself."""
+    """A structure from its label (``loop-pi``, ``loop-pid``, either with ``+hysteresis``
+    and/or ``+count_jump``) or itself."""
     if isinstance(spec, LoopFilter):
         return spec
-    if spec in STRUCTURES:
-        return LoopFilter(STRUCTURES[spec])
-    raise ValueError(f"unknown loop structure {spec!r}: one of {sorted(STRUCTURES)}")
+    base, *effects = str(spec).split("+")
+    if base in STRUCTURES and all(e in LOOP_EFFECTS for e in effects):
+        return LoopFilter(STRUCTURES[base], effects)
+    raise ValueError(f"unknown loop structure {spec!r}: one of {sorted(STRUCTURES)}, "
+                     f"optionally with +{' or +'.join(LOOP_EFFECTS)}")
 
 
 def error_steps(counts, reference, step) -> np.ndarray:
@@ -123,12 +156,23 @@ def reference_cycles(reference) -> np.ndarray:
 
 
 class _Columns:
-    """The design of one log: the columns that do not depend on ``p`` are built once."""
+    """The design of one log: the columns that do not depend on ``p`` are built once, with
+    the structure's encoder terms and the reading before each sample (the dead band's
+    state)."""
 
-    def __init__(self, e, taps):
+    def __init__(self, e, structure, counts=None):
+        s = loop_structure(structure)
+        taps = s.taps
+        self.structure = s
         e = np.asarray(e, dtype=float)
         n = e.size
         self.n = n
+        self.prev = None
+        if counts is not None:
+            readings = np.asarray(counts, dtype=float)
+            self.prev = np.concatenate((readings[:1], readings[:-1]))
+        self.band_col = 3 + 5 + taps if s.dead_band else None
+        self.jump_window = None  # set by fit_loop: _JumpWindow
         self.ed = np.concatenate(([0.0], e[:-1]))  # e_{j-1}: strictly causal
         i1 = lfilter([1.0], [1.0, -1.0], self.ed)
         i2 = lfilter([1.0], [1.0, -1.0], i1)
@@ -146,6 +190,13 @@ class _Columns:
             fixed.append(np.concatenate((np.zeros(k), self.ed[:self.n - k])))
         self.fixed = np.column_stack(fixed)  # ramp, I2, I1, taps
         self.j = np.arange(n, dtype=float)
+
+    def for_counts(self, counts) -> "_Columns":
+        """The same design for other readings (their own predecessors)."""
+        out = copy.copy(self)
+        k = np.asarray(counts, dtype=float)
+        out.prev = np.concatenate((k[:1], k[:-1]))
+        return out
 
     def lag(self, p):
         """``(L, p^j)`` for a pole ``p``."""
@@ -168,17 +219,24 @@ class _Columns:
         return out
 
 
-def _bounds(taps):
-    n_w = 5 + taps
+def _bounds(structure):
+    s = loop_structure(structure)
+    n_w = 5 + s.taps
     return np.array([[-50.0, 50.0], list(_LOG_S_BOUNDS), list(_P_BOUNDS)]
-                    + [[-_W_BOUND, _W_BOUND]] * n_w)
+                    + [[-_W_BOUND, _W_BOUND]] * n_w
+                    + ([lrde_effects.effect("hysteresis").bounds(1.0, 1.0)] if s.dead_band
+                       else []))
 
 
-def _log_lik_rows(x, cols, counts, mask=None, time_blur=0.0, pointwise=False):
-    """Reading log-likelihood of internal rows (sums over ``mask``, or per sample)."""
-    x = np.atleast_2d(x)
+def _interval_bounds(x, cols, counts, mask=None, time_blur=0.0, offsets=None):
+    """Standardised bounds ``(lower, upper)`` of the readings' intervals, rows of ``x``
+    (over ``mask``); ``offsets`` (per sample) are taken off the counts first."""
     z = cols.motion(x) + x[:, 0:1]
     k = np.asarray(counts, dtype=float)
+    prev = cols.prev
+    if offsets is not None:
+        k = k - offsets
+        prev = None if prev is None else prev - offsets
     s = 10.0 ** x[:, 1:2]
     if time_blur > 0:
         # As the periodic models' held-out score: timing blurred by a fraction of a sample,
@@ -187,12 +245,174 @@ def _log_lik_rows(x, cols, counts, mask=None, time_blur=0.0, pointwise=False):
         s = np.sqrt(s * s + (speed * time_blur) ** 2)
     if mask is not None:
         z, k = z[:, mask], k[mask]
+        prev = None if prev is None else prev[mask]
         s = s[:, mask] if s.shape[1] > 1 else s
-    lower = (k - z) / s
-    upper = (k + 1.0 - z) / s
+    if cols.band_col is not None:
+        lower, upper = lrde_effects.dead_band_bounds(
+            z - k, k, prev, 0.5 * x[:, cols.band_col:cols.band_col + 1])
+        return lower / s, upper / s
+    return (k - z) / s, (k + 1.0 - z) / s
+
+
+def _log_lik_rows(x, cols, counts, mask=None, time_blur=0.0, pointwise=False, offsets=None):
+    """Reading log-likelihood of internal rows (sums over ``mask``, or per sample).
+
+    With a count jump and no ``offsets`` the sum is marginalised over the jump's gap and sign
+    (uniform prior, as :func:`enclab.lrde.effects.log_likelihood`); per sample it needs the
+    jump placed (``offsets``).
+    """
+    x = np.atleast_2d(x)
+    if (cols.structure.count_jump and offsets is None and cols.jump_window is not None
+            and mask is None and time_blur == 0 and not pointwise):
+        return _windowed_jump_log_lik(x, cols, counts, cols.jump_window)
+    if cols.structure.count_jump and offsets is None:
+        if pointwise:
+            raise ValueError("per-sample values of a count-jump structure need the jump "
+                             "placed (offsets)")
+        terms = []
+        for delta in (0,) + lrde_effects.JUMP_SIGNS:
+            lower, upper = _interval_bounds(x, cols, counts, None, time_blur,
+                                            None if delta == 0 else np.full(cols.n, delta))
+            lp = lrde_effects._log_interval_full(lower, upper)
+            if mask is not None:
+                lp[:, ~mask] = 0.0
+            terms.append(lp)
+        flat = lrde_effects.jump_log_terms(terms[0], terms[1:]).reshape(x.shape[0], -1)
+        return logsumexp(flat, axis=1) - np.log(flat.shape[1])
+    lower, upper = _interval_bounds(x, cols, counts, mask, time_blur, offsets)
     if pointwise:
         return lrde_effects._log_interval_full(lower, upper)
     return lrde_effects._log_interval_rows(lower, upper)
+
+
+class _JumpWindow(NamedTuple):
+    """The gaps ``lo..hi`` (sample after the jump) that hold a count jump's posterior, the
+    offsets with the jump before ``lo`` (``ref``) and those the samples ``[lo, hi)`` take when
+    the jump lies after them (``alt``)."""
+
+    lo: int
+    hi: int
+    ref: np.ndarray
+    alt: np.ndarray
+
+
+def jump_window(x, cols, counts, margin) -> _JumpWindow | None:
+    """The window of a count jump's posterior at the row ``x``: the gaps of the most
+    probable sign whose probability exceeds 1e-12 of the largest, widened by ``margin``
+    samples each side (not across the log's middle, where the shorter segment changes side);
+    None when the other sign holds more than 1e-12 of the mass or those gaps lie on both
+    sides of the middle."""
+    x = np.atleast_2d(x)[:1]
+    terms = []
+    for delta in (0,) + lrde_effects.JUMP_SIGNS:
+        lower, upper = _interval_bounds(x, cols, counts, None, 0.0,
+                                        None if delta == 0 else np.full(cols.n, delta))
+        terms.append(lrde_effects._log_interval_full(lower, upper))
+    flat = lrde_effects.jump_log_terms(terms[0], terms[1:])[0]
+    post = np.exp(flat - logsumexp(flat))
+    sign_i = int(np.argmax(post.max(axis=1)))
+    if post[1 - sign_i].sum() > 1e-12:
+        return None
+    held = np.flatnonzero(post[sign_i] > 1e-12 * post[sign_i].max()) + 1  # sample after
+    lo = max(int(held[0]) - int(margin), 1)
+    hi = min(int(held[-1]) + int(margin), cols.n - 1)  # gaps lo..hi, samples [lo, hi)
+    # The margin stops at the log's middle, where the shorter segment changes side (the
+    # gaps beyond it hold no mass); held gaps on both sides of it take the full marginal.
+    middle = (cols.n + 1) // 2  # the first gap g with g >= n - g
+    if held[0] >= middle:
+        lo = max(lo, middle)
+    elif held[-1] < middle:
+        hi = min(hi, middle - 1)
+    else:
+        return None
+    delta = int(lrde_effects.JUMP_SIGNS[sign_i])
+    ref = lrde_effects.jump_offsets(cols.n, lo, delta)
+    shorter_before = lo < cols.n - lo
+    alt = np.full(hi - lo, delta if shorter_before else 0)
+    return _JumpWindow(lo, hi, ref, alt)
+
+
+def _windowed_jump_log_lik(x, cols, counts, window):
+    """The count jump's marginal over the gaps of its window (prior uniform over every gap
+    and sign, as the full marginal): the readings with the jump before the window, plus per
+    gap the change on the window's samples before it."""
+    lower, upper = _interval_bounds(x, cols, counts, None, 0.0, window.ref)
+    total = lrde_effects._log_interval_rows(lower, upper)
+    w = slice(window.lo, window.hi)
+    z = cols.motion(x)[:, w] + x[:, 0:1]
+    k = np.asarray(counts, dtype=float)[w]
+    s = 10.0 ** x[:, 1:2]
+    diffs = []
+    for off in (window.ref[w], window.alt):
+        kk = k - off
+        if cols.band_col is not None:
+            prev = cols.prev[w] - off
+            lo_b, up_b = lrde_effects.dead_band_bounds(
+                z - kk, kk, prev, 0.5 * x[:, cols.band_col:cols.band_col + 1])
+        else:
+            lo_b, up_b = kk - z, kk + 1.0 - z
+        diffs.append(lrde_effects._log_interval_full(lo_b / s, up_b / s))
+    change = np.concatenate((np.zeros((x.shape[0], 1)), np.cumsum(diffs[1] - diffs[0], axis=1)),
+                            axis=1)
+    return total + logsumexp(change, axis=1) - np.log(2.0 * (cols.n - 1))
+
+
+class JumpPlacement(NamedTuple):
+    """A count jump placed: ``gaps`` (the sample after the jump) of equal highest
+    probability, ``delta`` the offset of the segment on the side ``before`` (the samples
+    before the jump when True) in the frame of the other one, and ``offsets`` per sample with
+    the jump at ``gaps[0]``."""
+
+    gaps: np.ndarray
+    delta: int
+    before: bool
+    offsets: np.ndarray
+
+    def offsets_at(self, gap) -> np.ndarray:
+        out = np.zeros(self.offsets.size, dtype=np.int64)
+        if self.before:
+            out[:int(gap)] = self.delta
+        else:
+            out[int(gap):] = self.delta
+        return out
+
+
+def jump_placement(x, cols, counts, mask=None) -> JumpPlacement:
+    """The most probable count jump of a count-jump structure at the internal row ``x``.
+
+    With ``mask`` (a fold's training samples) every gap between the two training samples
+    around it is as probable: ``gaps`` holds them all, in the frame of the most probable one
+    (its offset side kept across the log's middle, where the shorter segment changes side).
+    """
+    x = np.atleast_2d(x)[:1]
+    terms = []
+    for delta in (0,) + lrde_effects.JUMP_SIGNS:
+        lower, upper = _interval_bounds(x, cols, counts, None, 0.0,
+                                        None if delta == 0 else np.full(cols.n, delta))
+        lp = lrde_effects._log_interval_full(lower, upper)[0]
+        if mask is not None:
+            lp[~mask] = 0.0
+        terms.append(lp)
+    flat = lrde_effects.jump_log_terms(terms[0][None, :], [t[None, :] for t in terms[1:]])[0]
+    sign_i, gap = np.unravel_index(int(np.argmax(flat)), flat.shape)
+    delta = int(lrde_effects.JUMP_SIGNS[sign_i])
+    index = int(gap) + 1
+    before = index < cols.n - index
+    # every gap in the frame of the most probable one: offset on the same side
+    c0 = np.cumsum(terms[0])
+    cd = np.cumsum(terms[1 + sign_i])
+    idx = np.arange(1, cols.n)
+    row = (cd[idx - 1] + c0[-1] - c0[idx - 1]) if before else (c0[idx - 1] + cd[-1] - cd[idx - 1])
+    # the run of equal values around the maximum: the gaps between two training samples
+    flat_run = row >= row[gap] - 1e-9
+    lo = hi = int(gap)
+    while lo > 0 and flat_run[lo - 1]:
+        lo -= 1
+    while hi + 1 < row.size and flat_run[hi + 1]:
+        hi += 1
+    gaps = np.arange(lo, hi + 1) + 1
+    placed = JumpPlacement(gaps, delta, bool(before), np.zeros(cols.n, dtype=np.int64))
+    return placed._replace(offsets=placed.offsets_at(gaps[0]))
 
 
 def _log_post(x, cols, counts, bounds, mask=None):
@@ -206,17 +426,41 @@ def _log_post(x, cols, counts, bounds, mask=None):
     return out
 
 
-def _start(cols, counts, taps, mask):
+def _effect_start(structure):
+    """Start values of a structure's sampled encoder terms (internal units)."""
+    return [lrde_effects.effect("hysteresis").start] if structure.dead_band else []
+
+
+def _change_point(resid) -> int:
+    """The index after which the mean of ``resid`` shifts most (CUSUM)."""
+    cusum = np.cumsum(resid - resid.mean())
+    return int(np.argmax(np.abs(cusum[:-1]))) + 1
+
+
+def _start(cols, counts, mask):
     """Least squares of the readings' centres on the columns at each ``p`` of a grid; the
-    ``p`` whose smoothed likelihood is best."""
+    ``p`` whose smoothed likelihood is best.
+
+    With a count jump the readings are first fitted without it; where the mean of that fit's
+    residual shifts most, a step column joins the columns (the jump's start), and the
+    offset refers to the longer segment.
+    """
     best = None
     y = np.asarray(counts, dtype=float) + 0.5
-    m = slice(None) if mask is None else mask
+    m = np.ones(cols.n, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+    extra = _effect_start(cols.structure)
     for p in _P_GRID:
         lag, trans = cols.lag(p)
         design = np.column_stack((np.ones(cols.n), cols.fixed, lag, trans))
         coef, *_ = np.linalg.lstsq(design[m], y[m], rcond=None)
-        x = np.concatenate(([coef[0], _SMOOTH_LOG_S, p], coef[1:]))
+        if cols.structure.count_jump:
+            at = np.flatnonzero(m)[_change_point(y[m] - design[m] @ coef)]
+            after = (np.arange(cols.n) >= at).astype(float)
+            coef, *_ = np.linalg.lstsq(np.column_stack((design, after))[m], y[m], rcond=None)
+            if np.count_nonzero(m[at:]) > np.count_nonzero(m[:at]):
+                coef[0] += coef[-1]  # the frame of the longer segment, after the jump
+            coef = coef[:-1]
+        x = np.concatenate(([coef[0], _SMOOTH_LOG_S, p], coef[1:], extra))
         value = _log_lik_rows(x, cols, counts, mask)[0]
         if best is None or value > best[0]:
             best = (value, x)
@@ -224,21 +468,28 @@ def _start(cols, counts, taps, mask):
 
 
 def point_fit(t, counts, reference, step, structure="loop-pi", mask=None, max_evals=3000,
-              cols=None) -> dict:
+              cols=None, start=None) -> dict:
     """Maximum of the log-posterior of a loop structure (L-BFGS-B, first with the jitter
     held at 0.05 step, a smoothed likelihood, then free).
 
     ``mask`` restricts the likelihood to some samples (a held-out fold's training cycles);
     the columns always run over the whole log (the logged error is known everywhere).
+    ``start``: an internal row to start from (that of the same filter without encoder terms
+    is extended by their start values), else least squares over a grid of poles.
     Returns ``x`` (internal row), ``log_post``, ``structure``, ``taps``, ``step``.
     """
     s = loop_structure(structure)
     counts = np.asarray(counts)
-    cols = cols or _Columns(error_steps(counts, reference, step), s.taps)
-    bounds = _bounds(s.taps)
+    cols = cols or _Columns(error_steps(counts, reference, step), s, counts)
+    bounds = _bounds(s)
     margin = 1e-6 * np.ptp(bounds, axis=1)
     lo, hi = bounds[:, 0] + margin, bounds[:, 1] - margin
-    x = np.clip(_start(cols, counts, s.taps, mask), lo, hi)
+    if start is None:
+        x = _start(cols, counts, mask)
+    else:
+        x = np.asarray(start, dtype=float)[:3 + s.n_coefficients]
+        x = np.concatenate((x, _effect_start(s)))
+    x = np.clip(x, lo, hi)
     free = np.arange(x.size) != 1
 
     def smoothed(y):
@@ -255,7 +506,7 @@ def point_fit(t, counts, reference, step, structure="loop-pi", mask=None, max_ev
     res = minimize(objective, x, method="L-BFGS-B", bounds=list(zip(lo, hi)),
                    options={"maxfun": int(max_evals)})
     return {"x": res.x, "log_post": -float(res.fun), "structure": s.label, "taps": s.taps,
-            "step": float(step), "hess_inv": res.hess_inv.todense()}
+            "effects": s.effects, "step": float(step), "hess_inv": res.hess_inv.todense()}
 
 
 def _cycle_extremes(z, starts):
@@ -274,6 +525,11 @@ class LoopFitResult(lrde_fit.FitResult):
     structure: str = "loop-pi"
     loop_samples: np.ndarray | None = None
     loop_names: tuple = ()
+    #: per-sample count offsets of the most probable count jump (count-jump structures)
+    jump_offsets: np.ndarray | None = None
+    #: the encoder terms' reported values: ``hysteresis`` (rad) quantiles, ``jump`` (index,
+    #: delta, probability within one sample)
+    loop_params: dict | None = None
 
     @property
     def label(self) -> str:
@@ -285,9 +541,11 @@ class LoopFitResult(lrde_fit.FitResult):
         return out
 
 
-def _names(taps):
+def _names(structure):
+    s = loop_structure(structure)
     return (("a0", "log_sigma", "p", "w_ramp", "w_I2", "w_I1")
-            + tuple(f"w_tap{k}" for k in range(1, taps + 1)) + ("w_lag", "w_transient"))
+            + tuple(f"w_tap{k}" for k in range(1, s.taps + 1)) + ("w_lag", "w_transient")
+            + (("hysteresis",) if s.dead_band else ()))
 
 
 class _EnsembleRun(NamedTuple):
@@ -337,12 +595,20 @@ def fit_loop(t, counts, reference, step, seed, structure="loop-pi", start=None, 
     t = np.asarray(t, dtype=float)
     counts = lrde_fit._check_int_counts(counts, t.size)
     s = loop_structure(structure)
-    cols = _Columns(error_steps(counts, reference, step), s.taps)
+    cols = _Columns(error_steps(counts, reference, step), s, counts)
     if start is None:
         start = point_fit(t, counts, reference, step, s, cols=cols)
     x0, cov = np.asarray(start["x"], dtype=float), np.asarray(start["hess_inv"])
-    bounds = _bounds(s.taps)
-    names = _names(s.taps)
+    bounds = _bounds(s)
+    names = _names(s)
+    cycles = reference_cycles(reference)
+    if s.count_jump:
+        # The jump's posterior is a few samples wide: the sampler's likelihood marginalises
+        # over the gaps around the point fit's jump (half a cycle each side) and costs one
+        # evaluation of the readings plus the window's; the full marginal when the point fit
+        # leaves the jump's place or sign open.
+        half_cycle = int(np.median(np.diff(cycles))) // 2
+        cols.jump_window = jump_window(x0, cols, counts, margin=half_cycle)
     ndim = len(names)
     n_walkers = max(int(n_walkers), 2 * ndim + (2 * ndim) % 2)
     root = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
@@ -379,17 +645,31 @@ def fit_loop(t, counts, reference, step, seed, structure="loop-pi", start=None, 
         accepted = accepted + sum(run.accepted for run in runs)
         kept += more
     rows = internal.reshape(-1, ndim)
-    cycles = reference_cycles(reference)
     f_hz = float((cycles.size - 1) / (t[cycles[-1]] - t[cycles[0]]))
     init = lrde_fit.initial_guess(t, counts, step)
     centre = float(init["centre_count"] if centre_count is None else centre_count)
     stroke = np.empty(rows.shape[0])
     a_eq = np.empty(rows.shape[0])
+    loop_params, offsets, cycle_offset = {}, None, 0.0
+    if s.count_jump:
+        # The jump is placed where the point fit puts it (its posterior is a few samples
+        # wide); the readings' offset of each cycle is its mean over the cycle's samples, so
+        # that a_eq is in the frame of the readings on either side of the jump.
+        gaps, delta, _, offsets = jump_placement(x0, cols, counts)
+        mass = _jump_mass(x0, cols, counts, int(gaps[0]), delta)
+        loop_params["jump"] = {"index": int(gaps[0]), "time_s": float(t[gaps[0]]),
+                               "delta": delta, "probability_within_1_sample": mass,
+                               "frame": "a_eq refers to the longer segment; the shorter one "
+                                        f"reads {delta:+d} count"}
+        seg = offsets[cycles[0]:cycles[-1]].astype(float)
+        cycle_offset = np.add.reduceat(seg, cycles[:-1] - cycles[0]) / np.diff(cycles)
     for i in range(0, rows.shape[0], 256):
         z = cols.motion(rows[i:i + 256]) + rows[i:i + 256, 0:1]
         top, bottom = _cycle_extremes(z, cycles)
         stroke[i:i + 256] = step * (top - bottom).mean(axis=1)
-        a_eq[i:i + 256] = step * (0.5 * (top + bottom)).mean(axis=1)
+        a_eq[i:i + 256] = step * (0.5 * (top + bottom) + cycle_offset).mean(axis=1)
+    if s.dead_band:
+        loop_params["hysteresis"] = lrde_fit._quantiles(step * rows[:, cols.band_col])
     e_b = a_eq - (centre + 0.5) * step
     sigma = step * 10.0 ** rows[:, 1]
     samples = np.column_stack((stroke, e_b, np.full(rows.shape[0], f_hz),
@@ -420,9 +700,26 @@ def fit_loop(t, counts, reference, step, seed, structure="loop-pi", start=None, 
         acceptance=float(np.mean(accepted) / (n_ensembles * (n_burn + kept))),
         wall_time_s=time.perf_counter() - started,
         settings={"n_ensembles": n_ensembles, "n_walkers": n_walkers, "n_steps": kept,
-                  "n_burn": n_burn, "structure": s.label, "harmonics": [], "effects": []},
+                  "n_burn": n_burn, "structure": s.label, "harmonics": [],
+                  "effects": list(s.effects)},
         b_samples=b_draws, stroke_samples=stroke, midpoint_samples=np.zeros(rows.shape[0]),
-        structure=s.label, loop_samples=rows, loop_names=names)
+        structure=s.label, loop_samples=rows, loop_names=names, jump_offsets=offsets,
+        loop_params=loop_params)
+
+
+def _jump_mass(x, cols, counts, index, delta) -> float:
+    """Posterior probability (at the row ``x``) of the jump lying within one sample of
+    ``index`` with the sign ``delta``."""
+    x = np.atleast_2d(x)[:1]
+    terms = []
+    for d in (0,) + lrde_effects.JUMP_SIGNS:
+        lower, upper = _interval_bounds(x, cols, counts, None, 0.0,
+                                        None if d == 0 else np.full(cols.n, d))
+        terms.append(lrde_effects._log_interval_full(lower, upper))
+    flat = lrde_effects.jump_log_terms(terms[0], terms[1:])[0]
+    post = np.exp(flat - logsumexp(flat))
+    gap = index - 1
+    return float(post[lrde_effects.JUMP_SIGNS.index(delta), max(gap - 1, 0):gap + 2].sum())
 
 
 def predictive_check(m, counts, reference, rng, n_sim=20) -> dict:
@@ -431,32 +728,48 @@ def predictive_check(m, counts, reference, rng, n_sim=20) -> dict:
     reading is drawn from the angle the logged errors before it set). Returns ``observed``,
     ``sim_mean``, ``sim_sd`` and ``z``."""
     counts = np.asarray(counts)
-    cols = _Columns(error_steps(counts, reference, m["step"]), m["taps"])
+    cols = _Columns(error_steps(counts, reference, m["step"]), m["structure"], counts)
     x = np.asarray(m["x"], dtype=float)[None, :]
-    z = cols.motion(x)[0] + x[0, 0]
-    s = 10.0 ** x[0, 1]
     observed = float(_log_lik_rows(x, cols, counts)[0])
-    scores = np.array([_log_lik_rows(x, cols, np.floor(z + s * rng.standard_normal(z.size)))[0]
-                       for _ in range(n_sim)])
+    scores = np.array([_log_lik_rows(x, cols.for_counts(sim), sim)[0]
+                       for sim in simulate_readings(x[0], cols, counts, rng, n_sim)])
     sd = float(scores.std(ddof=1))
     return {"observed": observed, "sim_mean": float(scores.mean()), "sim_sd": sd,
             "z": float((observed - scores.mean()) / sd) if sd > 0 else 0.0}
 
 
+def simulate_readings(x, cols, counts, rng, n_rep) -> np.ndarray:
+    """``n_rep`` readings (rows) of the internal row ``x`` given the logged error: the
+    angle plus its jitter through the structure's dead band, the most probable count jump of
+    the observed ``counts`` added."""
+    z = cols.motion(x[None, :])[0] + x[0]
+    noisy = z + 10.0 ** x[1] * rng.standard_normal((int(n_rep), z.size))
+    half_w = 0.5 * x[cols.band_col] if cols.band_col is not None else 0.0
+    sims = lrde_effects.relay(noisy, half_w)
+    if cols.structure.count_jump:
+        sims = sims + jump_placement(x, cols, counts).offsets
+    return sims
+
+
 def compare_loop_models(t, counts, reference, step, comparison, structures=tuple(STRUCTURES),
-                        min_z=2.0, fold_se=2.0, trust_z=-4.0, seed=0, threads=1) -> dict:
+                        effects=LOOP_EFFECTS, min_z=2.0, fold_se=2.0, trust_z=-4.0, seed=0,
+                        threads=1) -> dict:
     """The loop structures in the held-out comparison of the periodic models.
 
     Same folds (every other cycle of ``comparison``), same unit (the held-out cycle), same
     score (plug-in predictive density of a point fit with an eighth of a sample's time blur)
     as :func:`enclab.lrde.compare.compare_effect_models`, whose chosen model is the one to
     beat (the log's first cycle left out of every model's score: the loop's starting
-    transient is seen only by a fold that trains on it). A structure replaces it when its held-out gain over it exceeds ``min_z`` standard
-    errors, no fold is predicted worse by more than ``fold_se`` of that fold's standard
-    errors and its full-log BIC (log-likelihood under the same time blur, a parameter
-    costing ``ln N``) is lower; a structure with more taps replaces a simpler passing one
-    only by the same rule against it. Returns ``models`` (per structure: ``label,
-    delta_elpd, delta_se, z, delta_bic,
+    transient is seen only by a fold that trains on it). A structure replaces it when its
+    held-out gain over it exceeds ``min_z`` standard errors, no fold is predicted worse by
+    more than ``fold_se`` of that fold's standard errors and its full-log BIC (log-likelihood
+    under the same time blur, a parameter costing ``ln N``; a count jump one parameter) is
+    lower; a structure later in the list replaces a passing one only by the same rule
+    against it. The structures are ``structures``, then the one of them with the best held-out
+    score with each encoder term of ``effects`` (:data:`LOOP_EFFECTS`), fitted from its fits.
+    A count jump is scored as in the periodic comparison: placed where the training fit puts
+    it, anywhere between the two training samples around it with equal probability.
+    Returns ``models`` (per structure: ``label, delta_elpd, delta_se, z, delta_bic,
     delta_elpd_halves``), ``chosen`` (label or None), ``fits`` (label -> whole-log point fit)
     and, for a chosen structure, ``check`` (:func:`predictive_check`, ``trusted`` when
     ``z >= trust_z``).
@@ -468,38 +781,56 @@ def compare_loop_models(t, counts, reference, step, comparison, structures=tuple
     cycle = np.asarray(comparison["cycle"])
     odd = (cycle % 2).astype(bool)
     folds = [(~odd, odd), (odd, ~odd)]
-    jobs = [(t, counts, reference, step, s, train) for s in structures for train, _ in folds]
-    jobs += [(t, counts, reference, step, s, None) for s in structures]
-    fits = parallel.map_forked(_point_job, jobs, threads)
-    fold_fits = fits[:2 * len(structures)]
-    full = dict(zip(structures, fits[2 * len(structures):]))
-    units, totals = {}, {}
-    for i, label in enumerate(structures):
-        units[label], totals[label] = [], []
-        for (_, test), m in zip(folds, fold_fits[2 * i:2 * i + 2]):
-            cols = _Columns(error_steps(counts, reference, step), m["taps"])
-            lp = _log_lik_rows(m["x"], cols, counts, time_blur=0.125, pointwise=True)[0][test]
-            _, unit = np.unique(cycle[test], return_inverse=True)
-            units[label].append(np.bincount(unit, weights=lp))
-            totals[label].append(float(lp.sum()))
+    error = error_steps(counts, reference, step)
+    structures = [loop_structure(s) for s in structures]
+    unknown = [e for e in effects if e not in LOOP_EFFECTS]
+    if unknown:
+        raise ValueError(f"loop structures take the encoder terms {list(LOOP_EFFECTS)}, "
+                         f"got {unknown}")
+    fold_fits, full = _fit_structures(t, counts, reference, step, structures, folds, threads)
     pick = comparison["chosen"]
-    base = comparison["heldout"][pick]
-    units[pick] = list(base["units"])
     # The log's first cycle is left out of every model's held-out score: there the loop's
     # state at the start of the log (the transient p^j) is known only to a fold that trains
     # on it, and the other fold would be scored on a term it could not see.
     first = next(f for f, (_, test) in enumerate(folds) if test[0])
-    for label in units:
+    units = {pick: list(comparison["heldout"][pick]["units"])}
+    units[pick][first] = units[pick][first][1:]
+
+    def score_units(label):
+        cols = _Columns(error, label, counts)
+        units[label] = [_heldout_units(m["x"], cols, counts, train, test, cycle)
+                        for (train, test), m in zip(folds, fold_fits[label])]
         units[label][first] = units[label][first][1:]
-        totals[label] = [float(u.sum()) for u in units[label]]
+
+    for s in structures:
+        score_units(s.label)
+    totals = lambda label: [float(u.sum()) for u in units[label]]  # noqa: E731
+    plain = max(structures, key=lambda s: sum(totals(s.label))) if structures else None
+    variants = ([plain.with_effect(e) for e in effects if e not in plain.effects]
+                if plain is not None else [])
+    if variants:
+        # A dead band starts from the filter's own fits; a count jump from least squares
+        # with a step column (a fit without the jump bends the filter around it).
+        starts = {v.label: (fold_fits[plain.label], full[plain.label]) for v in variants
+                  if not v.count_jump}
+        more_folds, more_full = _fit_structures(t, counts, reference, step, variants, folds,
+                                                threads, starts)
+        fold_fits.update(more_folds)
+        full.update(more_full)
+        for v in variants:
+            score_units(v.label)
+    labels = [s.label for s in structures + variants]
 
     # Full-log log-likelihood under the same time blur, and parameter counts, for the BIC.
     blurred = {pick: float(comparison["full_fits"][pick]["log_lik_blurred"])}
     n_params = {pick: int(np.size(comparison["full_fits"][pick]["x"]))}
-    for label in structures:
-        cols = _Columns(error_steps(counts, reference, step), full[label]["taps"])
-        blurred[label] = float(_log_lik_rows(full[label]["x"], cols, counts, time_blur=0.125)[0])
-        n_params[label] = int(np.size(full[label]["x"]))
+    for label in labels:
+        cols = _Columns(error, label, counts)
+        offsets = (jump_placement(full[label]["x"], cols, counts).offsets
+                   if cols.structure.count_jump else None)
+        blurred[label] = float(_log_lik_rows(full[label]["x"], cols, counts, time_blur=0.125,
+                                             offsets=offsets)[0])
+        n_params[label] = int(np.size(full[label]["x"])) + int(cols.structure.count_jump)
 
     def delta_bic(a, b):
         return (2.0 * (blurred[a] - blurred[b])
@@ -508,7 +839,7 @@ def compare_loop_models(t, counts, reference, step, comparison, structures=tuple
     def score(a, b):
         diffs = [x[:min(x.size, y.size)] - y[:min(x.size, y.size)]
                  for x, y in zip(units[a], units[b])]
-        gains = [float(x - y) for x, y in zip(totals[a], totals[b])]
+        gains = [float(x - y) for x, y in zip(totals(a), totals(b))]
         ses = [lrde_compare._sum_se(d) for d in diffs]
         delta = float(sum(gains))
         se = lrde_compare._sum_se(np.concatenate(diffs))
@@ -518,11 +849,11 @@ def compare_loop_models(t, counts, reference, step, comparison, structures=tuple
         return delta, se, gains, passed
 
     models, chosen = [], None
-    for label in structures:
+    for label in labels:
         delta, se, gains, passed = score(label, pick)
         n_units = sum(u.size for u in units[label])
         models.append({"label": label, "over": pick,
-                       "elpd_per_cycle": float(sum(totals[label]) / max(n_units, 1)),
+                       "elpd_per_cycle": float(sum(totals(label)) / max(n_units, 1)),
                        "delta_elpd": delta, "delta_se": se,
                        "z": delta / se if se > 0 else None, "delta_elpd_halves": gains,
                        "delta_bic": float(delta_bic(label, pick)), "passed": passed})
@@ -533,7 +864,8 @@ def compare_loop_models(t, counts, reference, step, comparison, structures=tuple
                     f"it exceeds {min_z:g} standard errors, it predicts no fold worse by "
                     f"more than {fold_se:g} of that fold's standard errors and its full-log "
                     "delta BIC over it is positive (the periodic comparison's folds, units "
-                    "and time blur); more taps only by the same rule against fewer")}
+                    "and time blur); more taps or an encoder term only by the same rule "
+                    "against the structure without")}
     if chosen is not None:
         check = predictive_check(full[chosen], counts, reference,
                                  np.random.default_rng(seed))
@@ -542,8 +874,47 @@ def compare_loop_models(t, counts, reference, step, comparison, structures=tuple
     return out
 
 
-def _point_job(t, counts, reference, step, structure, train):
-    return point_fit(t, counts, reference, step, structure, mask=train)
+def _fit_structures(t, counts, reference, step, structures, folds, threads, starts=None):
+    """Point fits of each structure on each fold's training cycles and on the whole log:
+    ``({label: [fold fits]}, {label: whole-log fit})``; ``starts`` (label -> (fold fits,
+    whole-log fit) of the structure without encoder terms) start them."""
+    starts = starts or {}
+    jobs = []
+    for s in structures:
+        own = starts.get(s.label)
+        jobs += [(t, counts, reference, step, s.label, train,
+                  None if own is None else own[0][f]["x"]) for f, (train, _) in enumerate(folds)]
+        jobs.append((t, counts, reference, step, s.label, None,
+                     None if own is None else own[1]["x"]))
+    fits = parallel.map_forked(_point_job, jobs, threads)
+    per = len(folds) + 1
+    fold_fits = {s.label: fits[per * i:per * i + len(folds)] for i, s in enumerate(structures)}
+    full = {s.label: fits[per * i + len(folds)] for i, s in enumerate(structures)}
+    return fold_fits, full
+
+
+def _heldout_units(x, cols, counts, train, test, cycle):
+    """Per held-out cycle, the plug-in log predictive density of its readings (time blur of
+    an eighth of a sample)."""
+    if not cols.structure.count_jump:
+        lp = _log_lik_rows(x, cols, counts, time_blur=0.125, pointwise=True)[0][test]
+    else:
+        placed = jump_placement(x, cols, counts, mask=train)
+        lp0 = _log_lik_rows(x, cols, counts, time_blur=0.125, pointwise=True,
+                            offsets=np.zeros(cols.n))[0]
+        lpd = _log_lik_rows(x, cols, counts, time_blur=0.125, pointwise=True,
+                            offsets=np.full(cols.n, placed.delta))[0]
+        configs = [placed.offsets_at(g) != 0 for g in placed.gaps]
+        totals = np.array([np.where(c, lpd, lp0)[test].sum() for c in configs])
+        total = float(logsumexp(totals) - np.log(totals.size))
+        lp = np.where(configs[int(np.argmax(totals))], lpd, lp0)[test]
+        lp = lp + (total - lp.sum()) / lp.size
+    _, unit = np.unique(cycle[test], return_inverse=True)
+    return np.bincount(unit, weights=lp)
+
+
+def _point_job(t, counts, reference, step, structure, train, start=None):
+    return point_fit(t, counts, reference, step, structure, mask=train, start=start)
 
 
 def posterior_predictive_dwell(result, t, counts, reference, seed, n_draws=40):
@@ -555,15 +926,17 @@ def posterior_predictive_dwell(result, t, counts, reference, seed, n_draws=40):
     from enclab.lrde import dwell
 
     rng = np.random.default_rng(seed)
-    cols = _Columns(error_steps(counts, reference, result.step), STRUCTURES.get(
-        result.structure, 0))
+    cols = _Columns(error_steps(counts, reference, result.step), result.structure, counts)
     idx = rng.choice(result.loop_samples.shape[0], size=int(n_draws), replace=False)
     frames = []
     for d, i in enumerate(idx):
         x = result.loop_samples[i]
         z = cols.motion(x)[0] + x[0] + 10.0 ** x[1] * rng.standard_normal(cols.n)
-        table = dwell.cycle_table(np.floor(z).astype(np.int64), t, result.step,
-                                  f_hz=float(result.samples[i, 2]))
+        readings = lrde_effects.relay(z, 0.5 * x[cols.band_col] if cols.band_col is not None
+                                      else 0.0)[0]
+        if result.jump_offsets is not None:
+            readings = readings + result.jump_offsets
+        table = dwell.cycle_table(readings, t, result.step, f_hz=float(result.samples[i, 2]))
         frames.append(pd.DataFrame({"draw": d, "cycle": table["cycle"], "w1": table["w1"],
                                     "w2": table["w2"], "steps_pp": table["steps_pp"]}))
     return pd.concat(frames, ignore_index=True)

@@ -145,14 +145,21 @@ def select_command(df: pd.DataFrame, meta: dict, info: dict):
     return Channel.of(commands[0], df).values if commands else None
 
 
-def _loop_model_block(model_block: dict, loop_cmp: dict) -> dict:
+def _loop_model_block(model_block: dict, loop_cmp: dict, loop_fit) -> dict:
     """The ``model`` entry when a loop structure replaces the periodic pick: the loop's
-    label, comparison and check; the periodic comparison's entry under ``periodic``."""
-    out = {"chosen": loop_cmp["chosen"], "harmonics": [], "effects": [], "signature": {},
-           "indistinguishable": [], "not_ruled_out": [], "delta_bic": None,
+    label, comparison, check and encoder terms; the periodic comparison's entry under
+    ``periodic``."""
+    effects = list(lrde_loop.loop_structure(loop_cmp["chosen"]).effects)
+    params = dict(loop_fit.loop_params or {})
+    out = {"chosen": loop_cmp["chosen"], "harmonics": [], "effects": effects,
+           "signature": {e: lrde_effects.effect_signature(e) for e in effects},
+           "indistinguishable": [], "not_ruled_out": [],
+           "delta_bic": next(m["delta_bic"] for m in loop_cmp["models"]
+                             if m["label"] == loop_cmp["chosen"]),
            "models": model_block.get("models", []), "loop": loop_cmp["models"],
            "check": dict(loop_cmp["check"]), "rule": loop_cmp["rule"],
-           "n_cycles": model_block.get("n_cycles"), "params": {},
+           "n_cycles": model_block.get("n_cycles"),
+           "params": params,
            "note": (f"the angle is the logged tracking error through the {loop_cmp['chosen']} "
                     "filter (enclab.lrde.loop); the periodic models' pick was "
                     f"{model_block.get('chosen')}"),
@@ -331,6 +338,9 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
         try:
             loop_cmp = lrde_loop.compare_loop_models(
                 t, counts, command, step, comparison, structures,
+                effects=[e for e in lrde_effects.check_effects(
+                    settings.get("effects", lrde_effects.EFFECTS))
+                    if e in lrde_loop.LOOP_EFFECTS],
                 trust_z=float(settings.get("trust_z", compare.DEFAULT_TRUST_Z)),
                 seed=compare_loop_seed, threads=threads)
         except ValueError as err:
@@ -405,7 +415,7 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
         if chosen_fit is not None:
             result = chosen_fit
     if loop_fit is not None:
-        model_block = _loop_model_block(model_block, loop_cmp)
+        model_block = _loop_model_block(model_block, loop_cmp, loop_fit)
         _log.info("emcee fit of %s: %.1f s wall", loop_fit.label, loop_fit.wall_time_s)
         result, averaged = loop_fit, None
     elif loop_cmp is not None:
