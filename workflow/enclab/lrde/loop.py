@@ -296,12 +296,8 @@ class _JumpWindow(NamedTuple):
     alt: np.ndarray
 
 
-def jump_window(x, cols, counts, margin) -> _JumpWindow | None:
-    """The window of a count jump's posterior at the row ``x``: the gaps of the most
-    probable sign whose probability exceeds 1e-12 of the largest, widened by ``margin``
-    samples each side (not across the log's middle, where the shorter segment changes side);
-    None when the other sign holds more than 1e-12 of the mass or those gaps lie on both
-    sides of the middle."""
+def _jump_posterior(x, cols, counts) -> np.ndarray:
+    """Posterior of the count jump's sign and gap at the row ``x``: (signs, n - 1)."""
     x = np.atleast_2d(x)[:1]
     terms = []
     for delta in (0,) + lrde_effects.JUMP_SIGNS:
@@ -309,7 +305,16 @@ def jump_window(x, cols, counts, margin) -> _JumpWindow | None:
                                         None if delta == 0 else np.full(cols.n, delta))
         terms.append(lrde_effects._log_interval_full(lower, upper))
     flat = lrde_effects.jump_log_terms(terms[0], terms[1:])[0]
-    post = np.exp(flat - logsumexp(flat))
+    return np.exp(flat - logsumexp(flat))
+
+
+def jump_window(x, cols, counts, margin) -> _JumpWindow | None:
+    """The window of a count jump's posterior at the row ``x``: the gaps of the most
+    probable sign whose probability exceeds 1e-12 of the largest, widened by ``margin``
+    samples each side (not across the log's middle, where the shorter segment changes side);
+    None when the other sign holds more than 1e-12 of the mass or those gaps lie on both
+    sides of the middle."""
+    post = _jump_posterior(x, cols, counts)
     sign_i = int(np.argmax(post.max(axis=1)))
     if post[1 - sign_i].sum() > 1e-12:
         return None
@@ -710,14 +715,7 @@ def fit_loop(t, counts, reference, step, seed, structure="loop-pi", start=None, 
 def _jump_mass(x, cols, counts, index, delta) -> float:
     """Posterior probability (at the row ``x``) of the jump lying within one sample of
     ``index`` with the sign ``delta``."""
-    x = np.atleast_2d(x)[:1]
-    terms = []
-    for d in (0,) + lrde_effects.JUMP_SIGNS:
-        lower, upper = _interval_bounds(x, cols, counts, None, 0.0,
-                                        None if d == 0 else np.full(cols.n, d))
-        terms.append(lrde_effects._log_interval_full(lower, upper))
-    flat = lrde_effects.jump_log_terms(terms[0], terms[1:])[0]
-    post = np.exp(flat - logsumexp(flat))
+    post = _jump_posterior(x, cols, counts)
     gap = index - 1
     return float(post[lrde_effects.JUMP_SIGNS.index(delta), max(gap - 1, 0):gap + 2].sum())
 
