@@ -3,6 +3,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from enclab.core import parallel
 from enclab.lrde import effects, loop, pipeline, simulate
 
 STEP = simulate.ROS_DRILL_STEP
@@ -185,3 +186,25 @@ def test_stage_with_a_command_channel_reports_the_loop_fit():
     width = q["q95"] - q["q05"]
     assert q["q05"] - width <= stroke <= q["q95"] + width, (stroke, q)
     assert set(figures) == {"corner", "dwell_ppc", "bias_cycles", "misfit"}
+
+
+def _sum_of(*x):
+    return float(np.sum(x))
+
+
+def test_ensembles_beside_other_jobs_give_the_same_fit():
+    # The first round of ensembles as calls in one pool with an unrelated job (2 processes)
+    # and the fit run here (1 process) draw from the same random states: identical samples.
+    df, _ = simulate.closed_loop_pid_log(np.random.default_rng(4), n_cycles=30,
+                                         noise_std=0.02 * STEP)
+    df = df.iloc[1000:].reset_index(drop=True)
+    args = (df["t"].to_numpy(), df["counts"].to_numpy(), df["reference"].to_numpy(), STEP, 9)
+    sizes = {"n_ensembles": 3, "n_walkers": 16, "n_steps": 10, "n_burn": 10, "max_steps": 20}
+    here = loop.fit_loop(*args, **sizes, threads=1)
+    plan = loop.plan_loop_fit(*args, **sizes)
+    done = parallel.call_forked([(_sum_of, (1.0, 2.0))] + plan.calls, 2)
+    beside = plan.finish(done[1:], threads=2)
+    assert done[0] == 3.0
+    np.testing.assert_array_equal(beside.loop_samples, here.loop_samples)
+    np.testing.assert_array_equal(beside.samples, here.samples)
+    assert (beside.rhat, beside.settings) == (here.rhat, here.settings)

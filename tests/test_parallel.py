@@ -34,3 +34,10 @@ def test_a_failing_job_raises_its_own_error_in_the_caller():
 def test_one_job_or_one_process_runs_here():
     assert parallel.map_forked(_square_and_pid, [(2,)], 4) == [(4, os.getpid())]
     assert parallel.map_forked(_square_and_pid, [], 4) == []
+
+
+def test_calls_of_different_functions_share_one_pool():
+    calls = [(_square_and_pid, (3,)), (_fail_on_three, (5,)), (_square_and_pid, (4,))]
+    out = parallel.call_forked(calls, 2)
+    assert [out[0][0], out[1], out[2][0]] == [9, 5, 16]
+    assert parallel.call_forked(calls, 1) == [(9, os.getpid()), 5, (16, os.getpid())]

@@ -29,3 +29,13 @@ def map_forked(fn: Callable[..., Any], jobs: Sequence[tuple], processes: int) ->
             for future in pending:
                 future.cancel()
             raise
+
+
+def call_forked(calls: Sequence[tuple[Callable[..., Any], tuple]], processes: int) -> list:
+    """``[fn(*args) for fn, args in calls]`` as :func:`map_forked` runs them: jobs of
+    different kinds share one pool, so that a short one does not leave a core idle."""
+    return map_forked(_call, [(fn, tuple(args)) for fn, args in calls], processes)
+
+
+def _call(fn, args):
+    return fn(*args)

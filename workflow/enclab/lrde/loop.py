@@ -596,6 +596,17 @@ def fit_loop(t, counts, reference, step, seed, structure="loop-pi", start=None, 
     ``truth`` (rad, a fine channel) gives the bias ``b``: the mean over the reference's
     cycles of its turning points' midpoint, widened by half its rounding step; ``a = a_eq - b``.
     """
+    plan = plan_loop_fit(t, counts, reference, step, seed, structure, start, n_ensembles,
+                         n_walkers, n_steps, n_burn, max_steps, truth, truth_step, centre_count)
+    return plan.finish(parallel.call_forked(plan.calls, threads), threads)
+
+
+def plan_loop_fit(t, counts, reference, step, seed, structure="loop-pi", start=None,
+                  n_ensembles=4, n_walkers=64, n_steps=250, n_burn=400, max_steps=1000,
+                  truth=None, truth_step=None, centre_count=None) -> "LoopFitPlan":
+    """:func:`fit_loop` up to its first round of ensembles: ``calls`` (``(fn, args)`` each,
+    for :func:`enclab.core.parallel.call_forked`, beside other jobs) and ``finish`` (their
+    results, processes) -> :class:`LoopFitResult`, the same as :func:`fit_loop`'s."""
     started = time.perf_counter()
     t = np.asarray(t, dtype=float)
     counts = lrde_fit._check_int_counts(counts, t.size)
@@ -632,84 +643,128 @@ def fit_loop(t, counts, reference, step, seed, structure="loop-pi", start=None, 
         random = np.random.RandomState(int(rng.integers(2**32)))
         sampler_state = np.random.RandomState(int(rng.integers(2**32))).get_state()
         jobs.append((p0, random, n_burn + n_steps, cols, counts, bounds, None, sampler_state))
-    runs = parallel.map_forked(_sample_ensemble, jobs, threads)
-    chains = [run.chain[n_burn:] for run in runs]
-    accepted = sum(run.accepted for run in runs)
-    kept = n_steps
-    while True:
-        internal = np.stack(chains)  # (ensembles, steps, walkers, ndim)
-        tau, rhat, ess = lrde_fit._chain_diagnostics(internal, names)
-        converged = bool(max(rhat.values()) <= 1.01 and min(ess.values()) >= 1000)
-        if converged or kept >= max_steps:
-            break
-        more = min(n_steps, max_steps - kept)
-        runs = parallel.map_forked(_sample_ensemble, [
-            (run.coords, run.random, more, cols, counts, bounds, run.log_prob,
-             run.sampler_state) for run in runs], threads)
-        chains = [np.concatenate((c, run.chain)) for c, run in zip(chains, runs)]
-        accepted = accepted + sum(run.accepted for run in runs)
-        kept += more
-    rows = internal.reshape(-1, ndim)
-    f_hz = float((cycles.size - 1) / (t[cycles[-1]] - t[cycles[0]]))
-    init = lrde_fit.initial_guess(t, counts, step)
-    centre = float(init["centre_count"] if centre_count is None else centre_count)
-    stroke = np.empty(rows.shape[0])
-    a_eq = np.empty(rows.shape[0])
-    loop_params, offsets, cycle_offset = {}, None, 0.0
-    if s.count_jump:
-        # The jump is placed where the point fit puts it (its posterior is a few samples
-        # wide); the readings' offset of each cycle is its mean over the cycle's samples, so
-        # that a_eq is in the frame of the readings on either side of the jump.
-        gaps, delta, _, offsets = jump_placement(x0, cols, counts)
-        mass = _jump_mass(x0, cols, counts, int(gaps[0]), delta)
-        loop_params["jump"] = {"index": int(gaps[0]), "time_s": float(t[gaps[0]]),
-                               "delta": delta, "probability_within_1_sample": mass,
-                               "frame": "a_eq refers to the longer segment; the shorter one "
-                                        f"reads {delta:+d} count"}
-        seg = offsets[cycles[0]:cycles[-1]].astype(float)
-        cycle_offset = np.add.reduceat(seg, cycles[:-1] - cycles[0]) / np.diff(cycles)
-    for i in range(0, rows.shape[0], 256):
-        z = cols.motion(rows[i:i + 256]) + rows[i:i + 256, 0:1]
-        top, bottom = _cycle_extremes(z, cycles)
-        stroke[i:i + 256] = step * (top - bottom).mean(axis=1)
-        a_eq[i:i + 256] = step * (0.5 * (top + bottom) + cycle_offset).mean(axis=1)
-    if s.dead_band:
-        loop_params["hysteresis"] = lrde_fit._quantiles(step * rows[:, cols.band_col])
-    e_b = a_eq - (centre + 0.5) * step
-    sigma = step * 10.0 ** rows[:, 1]
-    samples = np.column_stack((stroke, e_b, np.full(rows.shape[0], f_hz),
-                               np.zeros(rows.shape[0]), sigma))
-    q = lrde_fit._quantiles
-    summary = {"A12": q(stroke), "E_b": q(e_b), "a_eq": q(a_eq), "f_hz": q(samples[:, 2]),
-               "phase": q(samples[:, 3]), "sigma": q(sigma)}
-    offset_a = bias_b = b_draws = None
-    reason = lrde_fit._UNIDENTIFIED
-    if truth is not None:
-        truth = np.asarray(truth, dtype=float)
-        top, bottom = _cycle_extremes(truth[None, :], cycles)
-        b_hat = float((0.5 * (top + bottom)).mean())
-        half = 0.5 * float(truth_step) if truth_step else 0.0
-        rng = np.random.default_rng(root.spawn(2)[1])
-        b_draws = b_hat + half * rng.uniform(-1.0, 1.0, rows.shape[0])
-        bias_b, offset_a = q(b_draws), q(a_eq - b_draws)
-        summary["bias_b"], summary["offset_a"] = bias_b, offset_a
-        reason = ("bias b from the truth channel (mean over the reference's cycles of the "
-                  "midpoint of its turning points, widened by half its step), offset "
-                  "a = a_eq - b")
-    return LoopFitResult(
-        param_names=lrde_fit.PARAM_NAMES, samples=samples, chains=None, a_eq_samples=a_eq,
-        summary=summary, offset_a=offset_a, bias_b=bias_b, reason=reason, tau=tau, rhat=rhat,
-        ess=ess, converged=converged, step=float(step), centre_count=centre,
-        steps_pp=int(init["steps_pp"]), t_ref=float(0.5 * (t[0] + t[-1])),
-        init={k: v for k, v in init.items() if k != "cycles"},
-        acceptance=float(np.mean(accepted) / (n_ensembles * (n_burn + kept))),
-        wall_time_s=time.perf_counter() - started,
-        settings={"n_ensembles": n_ensembles, "n_walkers": n_walkers, "n_steps": kept,
-                  "n_burn": n_burn, "structure": s.label, "harmonics": [],
-                  "effects": list(s.effects)},
-        b_samples=b_draws, stroke_samples=stroke, midpoint_samples=np.zeros(rows.shape[0]),
-        structure=s.label, loop_samples=rows, loop_names=names, jump_offsets=offsets,
-        loop_params=loop_params)
+    return LoopFitPlan(calls=[(_sample_ensemble, job) for job in jobs], started=started,
+                       t=t, counts=counts, reference=reference, step=step, root=root, s=s,
+                       cols=cols, x0=x0, bounds=bounds, names=names, cycles=cycles,
+                       n_ensembles=n_ensembles, n_walkers=n_walkers, n_steps=n_steps,
+                       n_burn=n_burn, max_steps=max_steps, truth=truth, truth_step=truth_step,
+                       centre_count=centre_count)
+
+
+@dataclass
+class LoopFitPlan:
+    """A loop fit between its set-up and its first round of ensembles (:func:`plan_loop_fit`)."""
+    calls: list
+    started: float
+    t: np.ndarray
+    counts: np.ndarray
+    reference: np.ndarray
+    step: float
+    root: np.random.SeedSequence
+    s: LoopFilter
+    cols: "_Columns"
+    x0: np.ndarray
+    bounds: np.ndarray
+    names: list
+    cycles: np.ndarray
+    n_ensembles: int
+    n_walkers: int
+    n_steps: int
+    n_burn: int
+    max_steps: int
+    truth: object
+    truth_step: object
+    centre_count: object
+
+    def finish(self, runs, threads=1) -> LoopFitResult:
+        """The fit from the first round's ``runs`` (results of ``calls``, in order): more
+        rounds until converged or ``max_steps``, ``threads`` ensembles at a time."""
+        t, counts, reference, step, root = (self.t, self.counts, self.reference, self.step,
+                                            self.root)
+        s, cols, x0, bounds, names, cycles = (self.s, self.cols, self.x0, self.bounds,
+                                              self.names, self.cycles)
+        n_ensembles, n_walkers, n_steps, n_burn, max_steps = (
+            self.n_ensembles, self.n_walkers, self.n_steps, self.n_burn, self.max_steps)
+        truth, truth_step, centre_count, started = (self.truth, self.truth_step,
+                                                    self.centre_count, self.started)
+        ndim = len(names)
+        chains = [run.chain[n_burn:] for run in runs]
+        accepted = sum(run.accepted for run in runs)
+        kept = n_steps
+        while True:
+            internal = np.stack(chains)  # (ensembles, steps, walkers, ndim)
+            tau, rhat, ess = lrde_fit._chain_diagnostics(internal, names)
+            converged = bool(max(rhat.values()) <= 1.01 and min(ess.values()) >= 1000)
+            if converged or kept >= max_steps:
+                break
+            more = min(n_steps, max_steps - kept)
+            runs = parallel.map_forked(_sample_ensemble, [
+                (run.coords, run.random, more, cols, counts, bounds, run.log_prob,
+                 run.sampler_state) for run in runs], threads)
+            chains = [np.concatenate((c, run.chain)) for c, run in zip(chains, runs)]
+            accepted = accepted + sum(run.accepted for run in runs)
+            kept += more
+        rows = internal.reshape(-1, ndim)
+        f_hz = float((cycles.size - 1) / (t[cycles[-1]] - t[cycles[0]]))
+        init = lrde_fit.initial_guess(t, counts, step)
+        centre = float(init["centre_count"] if centre_count is None else centre_count)
+        stroke = np.empty(rows.shape[0])
+        a_eq = np.empty(rows.shape[0])
+        loop_params, offsets, cycle_offset = {}, None, 0.0
+        if s.count_jump:
+            # The jump is placed where the point fit puts it (its posterior is a few samples
+            # wide); the readings' offset of each cycle is its mean over the cycle's samples, so
+            # that a_eq is in the frame of the readings on either side of the jump.
+            gaps, delta, _, offsets = jump_placement(x0, cols, counts)
+            mass = _jump_mass(x0, cols, counts, int(gaps[0]), delta)
+            loop_params["jump"] = {"index": int(gaps[0]), "time_s": float(t[gaps[0]]),
+                                   "delta": delta, "probability_within_1_sample": mass,
+                                   "frame": "a_eq refers to the longer segment; the shorter one "
+                                            f"reads {delta:+d} count"}
+            seg = offsets[cycles[0]:cycles[-1]].astype(float)
+            cycle_offset = np.add.reduceat(seg, cycles[:-1] - cycles[0]) / np.diff(cycles)
+        for i in range(0, rows.shape[0], 256):
+            z = cols.motion(rows[i:i + 256]) + rows[i:i + 256, 0:1]
+            top, bottom = _cycle_extremes(z, cycles)
+            stroke[i:i + 256] = step * (top - bottom).mean(axis=1)
+            a_eq[i:i + 256] = step * (0.5 * (top + bottom) + cycle_offset).mean(axis=1)
+        if s.dead_band:
+            loop_params["hysteresis"] = lrde_fit._quantiles(step * rows[:, cols.band_col])
+        e_b = a_eq - (centre + 0.5) * step
+        sigma = step * 10.0 ** rows[:, 1]
+        samples = np.column_stack((stroke, e_b, np.full(rows.shape[0], f_hz),
+                                   np.zeros(rows.shape[0]), sigma))
+        q = lrde_fit._quantiles
+        summary = {"A12": q(stroke), "E_b": q(e_b), "a_eq": q(a_eq), "f_hz": q(samples[:, 2]),
+                   "phase": q(samples[:, 3]), "sigma": q(sigma)}
+        offset_a = bias_b = b_draws = None
+        reason = lrde_fit._UNIDENTIFIED
+        if truth is not None:
+            truth = np.asarray(truth, dtype=float)
+            top, bottom = _cycle_extremes(truth[None, :], cycles)
+            b_hat = float((0.5 * (top + bottom)).mean())
+            half = 0.5 * float(truth_step) if truth_step else 0.0
+            rng = np.random.default_rng(root.spawn(2)[1])
+            b_draws = b_hat + half * rng.uniform(-1.0, 1.0, rows.shape[0])
+            bias_b, offset_a = q(b_draws), q(a_eq - b_draws)
+            summary["bias_b"], summary["offset_a"] = bias_b, offset_a
+            reason = ("bias b from the truth channel (mean over the reference's cycles of the "
+                      "midpoint of its turning points, widened by half its step), offset "
+                      "a = a_eq - b")
+        return LoopFitResult(
+            param_names=lrde_fit.PARAM_NAMES, samples=samples, chains=None, a_eq_samples=a_eq,
+            summary=summary, offset_a=offset_a, bias_b=bias_b, reason=reason, tau=tau, rhat=rhat,
+            ess=ess, converged=converged, step=float(step), centre_count=centre,
+            steps_pp=int(init["steps_pp"]), t_ref=float(0.5 * (t[0] + t[-1])),
+            init={k: v for k, v in init.items() if k != "cycles"},
+            acceptance=float(np.mean(accepted) / (n_ensembles * (n_burn + kept))),
+            wall_time_s=time.perf_counter() - started,
+            settings={"n_ensembles": n_ensembles, "n_walkers": n_walkers, "n_steps": kept,
+                      "n_burn": n_burn, "structure": s.label, "harmonics": [],
+                      "effects": list(s.effects)},
+            b_samples=b_draws, stroke_samples=stroke, midpoint_samples=np.zeros(rows.shape[0]),
+            structure=s.label, loop_samples=rows, loop_names=names, jump_offsets=offsets,
+            loop_params=loop_params)
 
 
 def _jump_mass(x, cols, counts, index, delta) -> float:

@@ -277,8 +277,8 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
         Processes for the comparison's point fits and the emcee fits: with 2 or more, the
         candidates' fits run side by side, and so do the paper's sinusoid (``before``), the
         final model (``after``) and the pooled alternatives, and the loop model's
-        ensembles (each depends only on the comparison and its own seed, so the results are
-        the same as with 1).
+        ensembles (the first round beside the sinusoid's fit; each depends only on the
+        comparison and its own seed, so the results are the same as with 1).
 
     Returns
     -------
@@ -369,19 +369,26 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
         after_kw = {"harmonics": harmonics, "effects": chosen + tuple(added),
                     "start": point["x"], **common}
         jobs.append((after_seed, after_kw))
-    try:
-        fits = _run_fits(t, counts, step, jobs, threads)
-    except ValueError as err:
-        raise ValueError(f"{where}: {err}") from err
-    result = fits[0]
-    chosen_fit = fits[-1] if after_kw is not None else None
+    loop_plan = None
     if loop_chosen:
         sampler = _sampler_settings(settings)
-        loop_fit = lrde_loop.fit_loop(
+        loop_plan = lrde_loop.plan_loop_fit(
             t, counts, command, step, fit_loop_seed, loop_cmp["chosen"],
             start=loop_cmp["fits"][loop_cmp["chosen"]],
             n_ensembles=sampler["n_ensembles"], max_steps=max(sampler["max_steps"], 250),
-            truth=common["truth"], truth_step=common["truth_step"], threads=threads)
+            truth=common["truth"], truth_step=common["truth_step"])
+    try:
+        # The loop's first round of ensembles shares one pool with the sinusoid's fit: the
+        # sinusoid alone, then the ensembles, would leave a core idle.
+        done = parallel.call_forked([(_fit, (t, counts, step, *job)) for job in jobs]
+                                    + (loop_plan.calls if loop_plan else []), threads)
+    except ValueError as err:
+        raise ValueError(f"{where}: {err}") from err
+    fits = done[:len(jobs)]
+    result = fits[0]
+    chosen_fit = fits[-1] if after_kw is not None else None
+    if loop_plan is not None:
+        loop_fit = loop_plan.finish(done[len(jobs):], threads)
     # Models the held-out comparison cannot tell from the pick (or, when it keeps the
     # sinusoid, does not rule out): their posteriors are pooled with the pick's (equal
     # weights), so the reported intervals do not hang on the pick.
