@@ -708,8 +708,6 @@ class LoopFitPlan:
         f_hz = float((cycles.size - 1) / (t[cycles[-1]] - t[cycles[0]]))
         init = lrde_fit.initial_guess(t, counts, step)
         centre = float(init["centre_count"] if centre_count is None else centre_count)
-        stroke = np.empty(rows.shape[0])
-        a_eq = np.empty(rows.shape[0])
         loop_params, offsets, cycle_offset = {}, None, 0.0
         if s.count_jump:
             # The jump is placed where the point fit puts it (its posterior is a few samples
@@ -723,11 +721,14 @@ class LoopFitPlan:
                                             f"reads {delta:+d} count"}
             seg = offsets[cycles[0]:cycles[-1]].astype(float)
             cycle_offset = np.add.reduceat(seg, cycles[:-1] - cycles[0]) / np.diff(cycles)
-        for i in range(0, rows.shape[0], 256):
-            z = cols.motion(rows[i:i + 256]) + rows[i:i + 256, 0:1]
-            top, bottom = _cycle_extremes(z, cycles)
-            stroke[i:i + 256] = step * (top - bottom).mean(axis=1)
-            a_eq[i:i + 256] = step * (0.5 * (top + bottom) + cycle_offset).mean(axis=1)
+        # The motion of every posterior row, in parts of whole 256-row chunks (the same
+        # arithmetic as in one part), ``threads`` parts at a time.
+        part = 256 * -(-rows.shape[0] // (256 * max(int(threads), 1)))
+        done = parallel.map_forked(_cycle_quantities, [
+            (rows[i:i + part], cols, cycles, cycle_offset)
+            for i in range(0, rows.shape[0], part)], threads)
+        stroke = step * np.concatenate([d[0] for d in done])
+        a_eq = step * np.concatenate([d[1] for d in done])
         if s.dead_band:
             loop_params["hysteresis"] = lrde_fit._quantiles(step * rows[:, cols.band_col])
         e_b = a_eq - (centre + 0.5) * step
@@ -765,6 +766,18 @@ class LoopFitPlan:
             b_samples=b_draws, stroke_samples=stroke, midpoint_samples=np.zeros(rows.shape[0]),
             structure=s.label, loop_samples=rows, loop_names=names, jump_offsets=offsets,
             loop_params=loop_params)
+
+
+def _cycle_quantities(rows, cols, cycles, cycle_offset):
+    """Per internal row: the mean over cycles of the stroke and of the turning points'
+    midpoint plus ``cycle_offset`` (steps), in chunks of 256 rows."""
+    stroke, mid = np.empty(rows.shape[0]), np.empty(rows.shape[0])
+    for i in range(0, rows.shape[0], 256):
+        z = cols.motion(rows[i:i + 256]) + rows[i:i + 256, 0:1]
+        top, bottom = _cycle_extremes(z, cycles)
+        stroke[i:i + 256] = (top - bottom).mean(axis=1)
+        mid[i:i + 256] = (0.5 * (top + bottom) + cycle_offset).mean(axis=1)
+    return stroke, mid
 
 
 def _jump_mass(x, cols, counts, index, delta) -> float:
