@@ -153,15 +153,11 @@ def test_count_jump_start_places_a_missed_count():
     np.testing.assert_allclose(loop._log_lik_rows(rows, cols, counts), full, rtol=0, atol=1e-6)
 
 
-@pytest.mark.slow
-def test_stage_with_a_command_channel_reports_the_loop_fit():
-    # A closed-loop log with its reference declared as a command channel: the loop structure
-    # replaces the periodic pick, its posterior is the reported one (converged, as every
-    # ensemble starts at the point fit), the periodic pick is not sampled, and the stroke's
-    # interval holds the simulated angle's per-cycle stroke within one width (a miss by more
-    # is a bias, not the 1-in-10 of a calibrated interval).
-    df, prm = simulate.closed_loop_pid_log(np.random.default_rng(7), n_cycles=50,
-                                           noise_std=0.02 * STEP, truth_step=STEP / 100)
+def _loop_log(seed, **kwargs):
+    """A closed-loop log after its pull-in, its reference declared as a command channel."""
+    df, prm = simulate.closed_loop_pid_log(np.random.default_rng(seed), n_cycles=50,
+                                           noise_std=0.02 * STEP, truth_step=STEP / 100,
+                                           **kwargs)
     df = df.iloc[3000:].reset_index(drop=True)
     df["t"] -= df["t"].iloc[0]
     meta = {"log_id": "loop", "channels": [
@@ -171,21 +167,63 @@ def test_stage_with_a_command_channel_reports_the_loop_fit():
          "storage": "counts", "step": STEP / 100},
         {"name": "reference", "role": "command", "joint": 1, "unit": "rad",
          "storage": "float", "step": None}]}
-    settings = {"n_ensembles": 4, "n_walkers": 16, "n_steps": 250, "max_steps": 1000,
-                "n_burn": 100, "effects": [], "effect_pairs": False}
-    block, figures, _, _ = pipeline.analyse_lrde_log(df, meta, 3, settings, threads=2)
+    return df, meta
+
+
+def _stroke(df):
+    """The simulated angle's mean per-cycle stroke over the reference's cycles."""
+    top, bottom = loop._cycle_extremes(df["theta"].to_numpy()[None, :],
+                                       loop.reference_cycles(df["reference"].to_numpy()))
+    return float((top - bottom).mean())
+
+
+_LOOP_SETTINGS = {"n_ensembles": 4, "n_walkers": 16, "n_steps": 250, "max_steps": 1000,
+                  "n_burn": 100, "effects": [], "effect_pairs": False}
+
+
+@pytest.mark.slow
+def test_stage_with_a_command_channel_reports_the_loop_fit():
+    # A closed-loop log with its reference declared as a command channel: the loop structure
+    # replaces the periodic pick, its posterior is the reported one (converged, as every
+    # ensemble starts at the point fit), the periodic pick is not sampled, and the stroke's
+    # interval holds the simulated angle's per-cycle stroke within one width (a miss by more
+    # is a bias, not the 1-in-10 of a calibrated interval).
+    df, meta = _loop_log(7)
+    block, figures, _, _ = pipeline.analyse_lrde_log(df, meta, 3, _LOOP_SETTINGS, threads=2)
     assert block["model"]["chosen"] in loop.STRUCTURES
     assert block["model"]["periodic"]["params"] == {}
     assert block["diagnostics"]["converged"]
     assert "averaged" not in block
-    ref = df["reference"].to_numpy()
-    top, bottom = loop._cycle_extremes(df["theta"].to_numpy()[None, :],
-                                       loop.reference_cycles(ref))
-    stroke = float((top - bottom).mean())
+    stroke = _stroke(df)
     q = block["A12"]
     width = q["q95"] - q["q05"]
     assert q["q05"] - width <= stroke <= q["q95"] + width, (stroke, q)
     assert set(figures) == {"corner", "dwell_ppc", "bias_cycles", "misfit"}
+
+
+@pytest.mark.slow
+def test_a_dead_band_the_truth_channel_finds_joins_the_loop_structure():
+    # A dead band of 0.15 step in the loop, the comparison offered no encoder term; the
+    # residual stage's finding (a stub of enclab.reference_effects.lrde_reference) puts the
+    # term into the loop structure: its width and the stroke within one interval width of
+    # the truth, the report's status "added from the truth channel", every estimate trusted.
+    band = 0.15 * STEP
+    df, meta = _loop_log(12, dead_band=band)
+    found = {"truth": "truth_counts", "explained": True, "effects": ["hysteresis"],
+             "found": [{"term": "hysteresis", "residual_effect": "backlash", "value": band,
+                        "ci": [0.95 * band, 1.05 * band]}], "not_modelled": []}
+    block, _, _, _ = pipeline.analyse_lrde_log(df, meta, 3, _LOOP_SETTINGS,
+                                               references={"counts": found}, threads=2)
+    model = block["model"]
+    assert model["chosen"] in loop.STRUCTURES and model["effects"] == ["hysteresis"]
+    assert block["after"]["model"] == model["chosen"] + "+hysteresis"
+    assert "joined it from the truth channel" in model["note"]
+    assert [(r["term"], r["status"]) for r in model["reference"]["terms"]] == [
+        ("hysteresis", "added from the truth channel")]
+    for q, true in ((model["params"]["hysteresis"], band), (block["A12"], _stroke(df))):
+        width = q["q95"] - q["q05"]
+        assert q["q05"] - width <= true <= q["q95"] + width, (true, q)
+    assert all(v["trusted"] for v in block["trust"].values()), block["trust"]
 
 
 def _sum_of(*x):

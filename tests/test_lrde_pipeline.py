@@ -235,6 +235,31 @@ def test_reference_terms_are_confirmed_or_named_as_standing_for_the_motion():
     assert report.reference_block(None, model_block, added=[]) is None
 
 
+def test_a_truth_channel_term_joins_a_loop_structure_with_room_for_it():
+    assert pipeline._loop_with_reference("loop-pi", ["hysteresis", "time_jitter"]) == (
+        "loop-pi+hysteresis", ["hysteresis"])
+    assert pipeline._loop_with_reference("loop-pid", ["count_jump", "hysteresis"]) == (
+        "loop-pid+count_jump", ["count_jump"])
+    # One encoder term per structure: a second one has no room, and the report says so.
+    assert pipeline._loop_with_reference("loop-pi+count_jump", ["hysteresis"]) == (
+        "loop-pi+count_jump", [])
+    found = {"truth": "fine", "explained": True, "effects": ["hysteresis"],
+             "found": [{"term": "hysteresis", "residual_effect": "backlash", "value": 2.1e-4,
+                        "ci": [2.05e-4, 2.15e-4]}], "not_modelled": []}
+    model_block = {"effects": ["count_jump"], "params": {}, "check": {}}
+    ref = report.reference_block(found, model_block, added=[])
+    assert [(r["term"], r["status"]) for r in ref["terms"]] == [
+        ("hysteresis", "not in this fit"), ("count_jump", "not confirmed by the truth channel")]
+    from types import SimpleNamespace
+    fit_stub = SimpleNamespace(converged=True, summary={k: {"median": 0.0} for k in
+                                                        ("A12", "E_b", "a_eq", "f_hz",
+                                                         "offset_a", "bias_b")})
+    trust = report.trust_block(fit_stub, dict(model_block, reference=ref))
+    assert not any(v["trusted"] for v in trust.values())
+    assert all("shows hysteresis, which this fit has no term for" in v["reason"]
+               for v in trust.values())
+
+
 def test_an_effect_the_model_cannot_hold_flags_the_estimates_it_biases():
     from types import SimpleNamespace
 

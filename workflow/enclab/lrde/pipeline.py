@@ -147,11 +147,26 @@ def select_command(df: pd.DataFrame, meta: dict, info: dict):
     return Channel.of(commands[0], df).values if commands else None
 
 
-def _loop_model_block(model_block: dict, loop_cmp: dict, loop_fit) -> dict:
+def _loop_with_reference(chosen: str, added) -> tuple[str, list]:
+    """The loop structure to fit: ``chosen`` with the encoder terms of ``added`` (the truth
+    channel's findings) it can take, one term per structure; ``(label, terms added)``."""
+    s = lrde_loop.loop_structure(chosen)
+    taken = []
+    for term in added:
+        if term in lrde_loop.LOOP_EFFECTS and not s.effects:
+            s = s.with_effect(term)
+            taken.append(term)
+    return s.label, taken
+
+
+def _loop_model_block(model_block: dict, loop_cmp: dict, loop_fit, label=None,
+                      added=()) -> dict:
     """The ``model`` entry when a loop structure replaces the periodic pick: the loop's
-    label, comparison, check and encoder terms; the periodic comparison's entry under
-    ``periodic``."""
-    effects = list(lrde_loop.loop_structure(loop_cmp["chosen"]).effects)
+    label, comparison, check and encoder terms (those of the fitted ``label``: the choice
+    with the truth channel's ``added`` terms, as for a periodic pick); the periodic
+    comparison's entry under ``periodic``."""
+    label = label or loop_cmp["chosen"]
+    effects = list(lrde_loop.loop_structure(label).effects)
     params = dict(loop_fit.loop_params or {})
     out = {"chosen": loop_cmp["chosen"], "harmonics": [], "effects": effects,
            "signature": {e: lrde_effects.effect_signature(e) for e in effects},
@@ -162,10 +177,13 @@ def _loop_model_block(model_block: dict, loop_cmp: dict, loop_fit) -> dict:
            "check": dict(loop_cmp["check"]), "rule": loop_cmp["rule"],
            "n_cycles": model_block.get("n_cycles"),
            "params": params,
-           "note": (f"the angle is the logged tracking error through the {loop_cmp['chosen']} "
+           "note": (f"the angle is the logged tracking error through the {label} "
                     "filter (enclab.lrde.loop); the periodic models' pick was "
                     f"{model_block.get('chosen')}"),
            "periodic": {k: v for k, v in model_block.items() if k != "models"}}
+    if added:
+        out["note"] += (f"; the held-out comparison chose {loop_cmp['chosen']}, and "
+                        f"{', '.join(added)} joined it from the truth channel")
     return out
 
 
@@ -369,12 +387,17 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
         after_kw = {"harmonics": harmonics, "effects": chosen + tuple(added),
                     "start": point["x"], **common}
         jobs.append((after_seed, after_kw))
-    loop_plan = None
+    loop_plan, loop_label, loop_added = None, None, []
     if loop_chosen:
+        # The truth channel's encoder terms join the loop structure as they join the
+        # periodic pick (one term per structure).
+        loop_label, loop_added = _loop_with_reference(loop_cmp["chosen"], added)
+        start = loop_cmp["fits"].get(loop_label)
+        if start is None:
+            start = lrde_loop.point_fit(t, counts, command, step, loop_label)
         sampler = _sampler_settings(settings)
         loop_plan = lrde_loop.plan_loop_fit(
-            t, counts, command, step, fit_loop_seed, loop_cmp["chosen"],
-            start=loop_cmp["fits"][loop_cmp["chosen"]],
+            t, counts, command, step, fit_loop_seed, loop_label, start=start,
             n_ensembles=sampler["n_ensembles"], max_steps=max(sampler["max_steps"], 250),
             truth=common["truth"], truth_step=common["truth_step"])
     try:
@@ -424,13 +447,15 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
         if chosen_fit is not None:
             result = chosen_fit
     if loop_fit is not None:
-        model_block = _loop_model_block(model_block, loop_cmp, loop_fit)
+        model_block = _loop_model_block(model_block, loop_cmp, loop_fit, loop_label,
+                                        loop_added)
         _log.info("emcee fit of %s: %.1f s wall", loop_fit.label, loop_fit.wall_time_s)
         result, averaged = loop_fit, None
     elif loop_cmp is not None:
         model_block["loop"] = loop_cmp["models"]
     if reference is not None:
-        model_block["reference"] = report.reference_block(reference, model_block, added)
+        model_block["reference"] = report.reference_block(
+            reference, model_block, loop_added if loop_fit is not None else added)
     reported = averaged if averaged is not None else result
     block = report.summary_block(reported, summary)
     block["channels"] = info

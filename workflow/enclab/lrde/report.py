@@ -202,7 +202,8 @@ def reference_block(reference: dict | None, model_block: dict, added: list) -> d
     dict or None
         ``truth``, ``explained``, ``found``, ``not_modelled``, ``added`` and ``terms``: per
         encoder or clock term of either side, ``status`` (``"found by both"``, ``"added from
-        the truth channel"``, ``"not confirmed by the truth channel"``), the fit's value
+        the truth channel"``, ``"not confirmed by the truth channel"``, ``"not in this fit"``:
+        found by the truth channel, no room for it in the fitted structure), the fit's value
         ``{median, q05, q95}`` (SI), the reference's ``value`` and ``ci`` where it has one,
         ``consistent`` (the two 90 % intervals overlap; None without both) and ``note``.
     """
@@ -223,6 +224,10 @@ def reference_block(reference: dict | None, model_block: dict, added: list) -> d
         if ref is None:
             row["status"] = "not confirmed by the truth channel"
             row["note"] = lrde_effects.effect(term).unconfirmed
+        elif term not in model_block["effects"]:
+            row["status"] = "not in this fit"
+            row["note"] = ("the truth channel shows it; the fitted model has no room for it "
+                           "beside its own terms")
         else:
             row["status"] = ("added from the truth channel" if term in added
                              else "found by both")
@@ -247,7 +252,8 @@ def trust_block(fit, model_block: dict) -> dict:
     are explained worse than its own simulations are), when its sampler did not converge,
     when the truth channel (``model_block["reference"]``) shows an effect that breaks an
     assumption the quantity rests on, leaves the readings unexplained or does not confirm a
-    term the quantity rests on (the dead band: the stroke), or (``offset_a``,
+    term the quantity rests on (the dead band: the stroke), when the fit has no term for an
+    encoder effect the truth channel shows (every quantity), or (``offset_a``,
     ``bias_b``) when it is not identified at all.
     """
     reasons = []
@@ -277,12 +283,15 @@ def trust_block(fit, model_block: dict) -> dict:
                    for row in ref.get("terms", [])
                    if row["status"] == "not confirmed by the truth channel"
                    and lrde_effects.effect(row["term"]).unconfirmed_biases]
+    missing = [row["term"] for row in ref.get("terms", []) if row["status"] == "not in this fit"]
     out = {}
     for key in _ESTIMATES:
         r = list(reasons)
         r += [f"the truth channel shows {e['residual_effect']}, which this model has no term "
               f"for ({e['why']})" for e in ref.get("not_modelled", []) if key in e["biases"]]
         r += [why for biases, why in unconfirmed if key in biases]
+        r += [f"the truth channel shows {term}, which this fit has no term for"
+              for term in missing]
         if fit.summary.get(key) is None:
             r = ["not identified (readings give only a_eq = a + b)"]
         out[key] = {"trusted": not r, "reason": "; ".join(r) if r else None}
