@@ -114,9 +114,11 @@ def _fit(t, counts, step, seed, kwargs):
     return fit.fit_sinusoid(t, counts, step, seed, **kwargs)
 
 
-def _run_fits(t, counts, step, jobs, threads):
-    """The emcee fits of ``jobs`` (``(seed, kwargs)`` each), in order, ``threads`` at a time."""
-    return parallel.map_forked(_fit, [(t, counts, step, *job) for job in jobs], threads)
+def _run_fits(t, counts, step, jobs, threads, beside=()):
+    """The emcee fits of ``jobs`` (``(seed, kwargs)`` each), in order, ``threads`` at a time,
+    followed by the results of the ``beside`` calls (``(fn, args)``) run in the same pool."""
+    return parallel.call_forked([(_fit, (t, counts, step, *job)) for job in jobs]
+                                + list(beside), threads)
 
 
 def _alternative_kwargs(t, counts, step, comparison, added, common, settings):
@@ -392,19 +394,17 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
         # The truth channel's encoder terms join the loop structure as they join the
         # periodic pick (one term per structure).
         loop_label, loop_added = _loop_with_reference(loop_cmp["chosen"], added)
-        start = loop_cmp["fits"].get(loop_label)
-        if start is None:
-            start = lrde_loop.point_fit(t, counts, command, step, loop_label)
         sampler = _sampler_settings(settings)
-        loop_plan = lrde_loop.plan_loop_fit(
-            t, counts, command, step, fit_loop_seed, loop_label, start=start,
+        loop_plan = lrde_loop.plan_loop_fit(  # its own point fit for a structure not compared
+            t, counts, command, step, fit_loop_seed, loop_label,
+            start=loop_cmp["fits"].get(loop_label),
             n_ensembles=sampler["n_ensembles"], max_steps=max(sampler["max_steps"], 250),
             truth=common["truth"], truth_step=common["truth_step"])
     try:
         # The loop's first round of ensembles shares one pool with the sinusoid's fit: the
         # sinusoid alone, then the ensembles, would leave a core idle.
-        done = parallel.call_forked([(_fit, (t, counts, step, *job)) for job in jobs]
-                                    + (loop_plan.calls if loop_plan else []), threads)
+        done = _run_fits(t, counts, step, jobs, threads,
+                         beside=loop_plan.calls if loop_plan else ())
     except ValueError as err:
         raise ValueError(f"{where}: {err}") from err
     fits = done[:len(jobs)]
