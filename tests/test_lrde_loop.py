@@ -4,7 +4,7 @@ import pandas as pd
 import pytest
 
 from enclab.core import parallel
-from enclab.lrde import effects, loop, pipeline, simulate
+from enclab.lrde import effects, loop, pipeline, report, simulate
 
 STEP = simulate.ROS_DRILL_STEP
 
@@ -46,6 +46,18 @@ def test_error_and_cycles_checks():
         loop.error_steps(np.zeros(5, dtype=int), np.zeros(4), STEP)
     with pytest.raises(ValueError, match="fewer than two whole cycles"):
         loop.reference_cycles(np.sin(np.linspace(0, 3 * np.pi, 100)))
+    reference = np.sin(np.arange(400) / 10.0)
+    reference[77] = np.nan
+    with pytest.raises(ValueError, match="not finite at sample 77"):
+        loop.error_steps(np.zeros(400, dtype=int), reference, STEP)
+    # A log too short for two whole cycles is named as such by every fit, even when empty.
+    for n in (0, 1, 40):
+        t = np.arange(n) / 2000.0
+        args = (t, np.zeros(n, dtype=int), 0.002 * np.sin(2 * np.pi * 20 * t), STEP)
+        with pytest.raises(ValueError, match="fewer than two whole cycles"):
+            loop.point_fit(*args)
+        with pytest.raises(ValueError, match="fewer than two whole cycles"):
+            loop.fit_loop(*args, seed=1)
     with pytest.raises(ValueError, match="unknown loop structure"):
         loop.loop_structure("loop-p")
 
@@ -60,6 +72,34 @@ def test_command_channel_only_when_declared():
     assert pipeline.select_command(df, meta, info) is None  # another joint's command
     meta["channels"][-1]["joint"] = 1
     np.testing.assert_array_equal(pipeline.select_command(df, meta, info), [0.0, 0.1])
+
+
+def test_a_command_that_cannot_drive_the_loop():
+    t = np.arange(400) / 2000.0
+    meta = {"channels": [{"name": "c", "role": "measured", "joint": 1, "storage": "counts",
+                          "step": STEP},
+                         {"name": "r", "role": "command", "joint": 1, "storage": "float"}]}
+    info = {"measured": "c"}
+    cycling = pd.DataFrame({"t": t, "c": 0, "r": 0.002 * np.sin(2 * np.pi * 20 * t)})
+    command, why = pipeline.loop_command(cycling, meta, info, "log.csv")
+    np.testing.assert_array_equal(command, cycling["r"].to_numpy())
+    assert why is None
+    # A held set point (a quantized loop may cycle around it): the periodic models stay, and
+    # the block says why the loop structures were not offered.
+    held = cycling.assign(r=0.001)
+    command, why = pipeline.loop_command(held, meta, info, "log.csv")
+    assert command is None and "'r'" in why and "fewer than two whole cycles" in why
+    # A sample that is not finite is bad input: file, column and row.
+    broken = cycling.copy()
+    broken.loc[123, "r"] = np.inf
+    with pytest.raises(ValueError, match=r"log.csv: column 'r', row 123: the command is not"):
+        pipeline.loop_command(broken, meta, info, "log.csv")
+    assert pipeline.loop_command(cycling, {"channels": meta["channels"][:1]}, info) == (None,
+                                                                                       None)
+    # The report says so beside the comparison of the periodic models.
+    block = {"models": [{"label": "sinusoid", "elpd_per_cycle": -1.0}], "rule": "a rule",
+             "chosen": "sinusoid", "loop_not_offered": why}
+    assert f"Loop structures not offered: {why}." in report._effect_lines({"model": block})
 
 
 @pytest.mark.slow

@@ -134,12 +134,19 @@ def loop_structure(spec) -> LoopFilter:
 
 
 def error_steps(counts, reference, step) -> np.ndarray:
-    """The loop's error ``reference / step - counts`` in steps."""
+    """The loop's error ``reference / step - counts`` in steps; a ValueError naming the
+    first sample that is not finite, or when the reference holds fewer than two whole cycles
+    (:func:`reference_cycles`: a loop structure's quantities are means over them)."""
     r = np.asarray(reference, dtype=float)
     c = np.asarray(counts, dtype=float)
-    if r.shape != c.shape or not np.all(np.isfinite(r)):
-        raise ValueError(f"reference must be finite with the shape of counts {c.shape}, "
-                         f"got {r.shape}")
+    if r.shape != c.shape or r.ndim != 1:
+        raise ValueError(f"reference must be one-dimensional with the shape of counts "
+                         f"{c.shape}, got {r.shape}")
+    bad = np.flatnonzero(~np.isfinite(r))
+    if bad.size:
+        raise ValueError(f"reference is not finite at sample {bad[0]} ({r[bad[0]]}) and "
+                         f"{bad.size - 1} more")
+    reference_cycles(r)
     return r / step - c
 
 
@@ -147,6 +154,8 @@ def reference_cycles(reference) -> np.ndarray:
     """Sample indices starting the reference's cycles: its upward crossings of its mean
     (at least two, else a ValueError)."""
     r = np.asarray(reference, dtype=float)
+    if r.size < 3:
+        raise ValueError(f"the reference has {r.size} samples: fewer than two whole cycles")
     r = r - 0.5 * (r.max() + r.min())
     up = np.flatnonzero((r[:-1] < 0) & (r[1:] >= 0)) + 1
     if up.size < 3:

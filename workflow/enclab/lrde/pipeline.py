@@ -137,16 +137,43 @@ def _alternative_kwargs(t, counts, step, comparison, added, common, settings):
     return out
 
 
-def select_command(df: pd.DataFrame, meta: dict, info: dict):
-    """The commanded or reference angle (rad) of the measured channel's joint: the first
-    channel with role ``"command"`` on that joint (on any joint when the measured channel has
-    none), or None when the log declares none."""
+def _command_channel(meta: dict, info: dict) -> dict | None:
     channels = meta.get("channels") or []
     measured = [ch for ch in channels if ch.get("name") == info.get("measured")]
     joint = measured[0].get("joint") if measured else None
     commands = [ch for ch in channels if ch.get("role") == "command"
                 and (joint is None or ch.get("joint") == joint)]
-    return Channel.of(commands[0], df).values if commands else None
+    return commands[0] if commands else None
+
+
+def select_command(df: pd.DataFrame, meta: dict, info: dict):
+    """The commanded or reference angle (rad) of the measured channel's joint: the first
+    channel with role ``"command"`` on that joint (on any joint when the measured channel has
+    none), or None when the log declares none."""
+    channel = _command_channel(meta, info)
+    return Channel.of(channel, df).values if channel is not None else None
+
+
+def loop_command(df: pd.DataFrame, meta: dict, info: dict, source: str = "the log"):
+    """``(command, why_not)``: the command (:func:`select_command`) when it can drive a loop
+    structure, else ``(None, why)``: a command that does not hold two whole cycles (a held
+    set point, around which a quantized loop may still cycle) leaves the periodic models to
+    describe the motion. A command with a sample that is not finite is bad input: a
+    ValueError naming ``source`` (the file), the column and the sample."""
+    command = select_command(df, meta, info)
+    if command is None:
+        return None, None
+    name = _command_channel(meta, info)["name"]
+    bad = np.flatnonzero(~np.isfinite(command))
+    if bad.size:
+        raise ValueError(f"{source}: column {name!r}, row {bad[0]}: the command is not "
+                         f"finite ({command[bad[0]]})")
+    try:
+        lrde_loop.reference_cycles(command)
+    except ValueError as err:
+        return None, (f"the command channel {name!r} does not drive a loop structure ({err}); "
+                      "the periodic models describe the motion")
+    return command, None
 
 
 def _loop_with_reference(chosen: str, added) -> tuple[str, list]:
@@ -352,7 +379,9 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
     # logged error through a low-order filter) enter the held-out comparison against the
     # periodic pick; a winning structure's posterior gives the reported estimates, and the
     # periodic pick's own posterior and its alternatives are then not sampled.
-    command = select_command(df, meta, info)
+    command, loop_not_offered = loop_command(df, meta, info, source)
+    if loop_not_offered:
+        _log.warning("%s: %s", source, loop_not_offered)
     structures = list(settings.get("loop_models", list(lrde_loop.STRUCTURES)))
     loop_cmp = loop_fit = None
     if command is not None and comparison is not None and structures:
@@ -453,6 +482,8 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
         result, averaged = loop_fit, None
     elif loop_cmp is not None:
         model_block["loop"] = loop_cmp["models"]
+    elif loop_not_offered:
+        model_block["loop_not_offered"] = loop_not_offered
     if reference is not None:
         model_block["reference"] = report.reference_block(
             reference, model_block, loop_added if loop_fit is not None else added)

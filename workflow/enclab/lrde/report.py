@@ -394,6 +394,8 @@ def _effect_lines(block: dict) -> list[str]:
         bic = f"{r['delta_bic']:.1f}" if r.get("delta_bic") is not None else "-"
         lines.append(f"| {r['label']} | {r['elpd_per_cycle']:.3f} | {gain} | {z} | {bic} |")
     lines += ["", f"Rule: {m['rule']}.", ""]
+    if m.get("loop_not_offered"):
+        lines += [f"Loop structures not offered: {m['loop_not_offered']}.", ""]
     localized = (m.get("check") or {}).get("localized")
     if m["chosen"] == "sinusoid" and not m.get("not_ruled_out"):
         lines.append("Result: no effect predicts the held-out readings better than the "
