@@ -286,3 +286,35 @@ def test_ensembles_beside_other_jobs_give_the_same_fit():
     np.testing.assert_array_equal(beside.loop_samples, here.loop_samples)
     np.testing.assert_array_equal(beside.samples, here.samples)
     assert (beside.rhat, beside.settings) == (here.rhat, here.settings)
+
+
+def test_an_encoder_term_must_beat_its_structure_even_when_that_lost_to_the_pick():
+    labels = ["loop-pi", "loop-pid", "loop-pi+hysteresis", "loop-pi+count_jump"]
+    variants = labels[2:]
+
+    def stub(wins):
+        return lambda a, b: (a, b) in wins
+
+    # loop-pi loses to the periodic pick on a fold; its band variant beats the pick but not
+    # loop-pi: nothing is chosen (before, the variant was, with a band of width 0).
+    passed, chosen = loop._loop_choice(labels, "harmonic3", "loop-pi", variants,
+                                       stub({("loop-pi+hysteresis", "harmonic3")}))
+    assert chosen is None and not any(passed.values())
+    # A real band beats both: chosen, although loop-pi did not pass.
+    passed, chosen = loop._loop_choice(
+        labels, "harmonic3", "loop-pi", variants,
+        stub({("loop-pi+hysteresis", "harmonic3"), ("loop-pi+hysteresis", "loop-pi")}))
+    assert chosen == "loop-pi+hysteresis" and passed == {
+        "loop-pi": False, "loop-pid": False, "loop-pi+hysteresis": True,
+        "loop-pi+count_jump": False}
+    # Later labels replace an earlier choice only by beating it.
+    wins = {("loop-pi", "h"), ("loop-pid", "h"), ("loop-pi+hysteresis", "h")}
+    assert loop._loop_choice(labels, "h", "loop-pi", variants, stub(wins))[1] == "loop-pi"
+    assert loop._loop_choice(labels, "h", "loop-pi", variants,
+                             stub(wins | {("loop-pid", "loop-pi")}))[1] == "loop-pid"
+    # The band variant beats loop-pi, its structure, but not loop-pid, chosen before it.
+    assert loop._loop_choice(labels, "h", "loop-pi", variants, stub(
+        wins | {("loop-pid", "loop-pi"), ("loop-pi+hysteresis", "loop-pi")}))[1] == "loop-pid"
+    assert loop._loop_choice(labels, "h", "loop-pi", variants, stub(
+        wins | {("loop-pid", "loop-pi"), ("loop-pi+hysteresis", "loop-pi"),
+                ("loop-pi+hysteresis", "loop-pid")}))[1] == "loop-pi+hysteresis"

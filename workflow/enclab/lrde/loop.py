@@ -923,17 +923,23 @@ def compare_loop_models(t, counts, reference, step, comparison, structures=tuple
                       and delta_bic(a, b) > 0)
         return delta, se, gains, passed
 
-    models, chosen = [], None
+    variant_labels = [v.label for v in variants]
+    passed, chosen = _loop_choice(labels, pick, plain and plain.label, variant_labels,
+                                  lambda a, b: score(a, b)[3])
+    models = []
     for label in labels:
-        delta, se, gains, passed = score(label, pick)
+        delta, se, gains, _ = score(label, pick)
         n_units = sum(u.size for u in units[label])
-        models.append({"label": label, "over": pick,
-                       "elpd_per_cycle": float(sum(totals(label)) / max(n_units, 1)),
-                       "delta_elpd": delta, "delta_se": se,
-                       "z": delta / se if se > 0 else None, "delta_elpd_halves": gains,
-                       "delta_bic": float(delta_bic(label, pick)), "passed": passed})
-        if passed and (chosen is None or score(label, chosen)[3]):
-            chosen = label
+        row = {"label": label, "over": pick,
+               "elpd_per_cycle": float(sum(totals(label)) / max(n_units, 1)),
+               "delta_elpd": delta, "delta_se": se,
+               "z": delta / se if se > 0 else None, "delta_elpd_halves": gains,
+               "delta_bic": float(delta_bic(label, pick)), "passed": passed[label]}
+        if label in variant_labels:
+            d_plain, se_plain, _, passed_plain = score(label, plain.label)
+            row["over_plain"] = {"label": plain.label, "delta_elpd": d_plain,
+                                 "delta_se": se_plain, "passed": passed_plain}
+        models.append(row)
     out = {"models": models, "chosen": chosen, "fits": full,
            "rule": (f"a loop structure replaces the periodic pick when its held-out gain over "
                     f"it exceeds {min_z:g} standard errors, it predicts no fold worse by "
@@ -947,6 +953,22 @@ def compare_loop_models(t, counts, reference, step, comparison, structures=tuple
         out["check"] = check | {"trusted": bool(check["z"] >= trust_z), "threshold_z": trust_z,
                                 "localized": False, "local_z": None, "trace": {}}
     return out
+
+
+def _loop_choice(labels, pick, plain, variants, passes) -> tuple[dict, str | None]:
+    """``(passed, chosen)`` of the loop comparison's rule, ``passes(a, b)`` telling whether
+    ``a`` beats ``b``: a label passes when it beats the periodic ``pick`` and, for one of
+    the ``variants`` (``plain`` with an encoder term), ``plain`` too, whether or not
+    ``plain`` beat the pick (else a term of no size could ride past the pick on a fold that
+    ``plain`` predicts worse); in the order of ``labels``, a passing label replaces the one
+    chosen before only when it beats it."""
+    passed, chosen = {}, None
+    for label in labels:
+        passed[label] = bool(passes(label, pick)
+                             and (label not in variants or passes(label, plain)))
+        if passed[label] and (chosen is None or passes(label, chosen)):
+            chosen = label
+    return passed, chosen
 
 
 def _fit_structures(t, counts, reference, step, structures, folds, threads, starts=None):
