@@ -318,3 +318,28 @@ def test_an_encoder_term_must_beat_its_structure_even_when_that_lost_to_the_pick
     assert loop._loop_choice(labels, "h", "loop-pi", variants, stub(
         wins | {("loop-pid", "loop-pi"), ("loop-pi+hysteresis", "loop-pi"),
                 ("loop-pi+hysteresis", "loop-pid")}))[1] == "loop-pi+hysteresis"
+
+
+def test_fold_fits_start_at_the_whole_logs_and_a_tap_at_the_fit_without():
+    # A soft loop read without noise (from the closed-loop benchmark's draws), where least
+    # squares alone left a fold's loop-pi fit and the whole-log loop-pid fit at a pole near 0
+    # (the lag and the tap trading places) and so lost them to the periodic pick.
+    from benchmarks import lrde_closed_loop as bench
+
+    df, _, _ = bench.simulate_log(np.random.default_rng(20291208), "soft", "none", 20)
+    t, counts, ref = (df[c].to_numpy() for c in ("t", "coarse", "reference"))
+    cycle = np.floor(t * bench.F_HZ + 1e-9).astype(np.int64)
+    odd = (cycle % 2).astype(bool)
+    folds, full = loop._fit_structures(t, counts, ref, STEP, [loop.loop_structure("loop-pi"),
+                                                              loop.loop_structure("loop-pid")],
+                                       [(~odd, odd), (odd, ~odd)], threads=1)
+    pole = {label: m["x"][2] for label, m in full.items()}
+    assert abs(pole["loop-pid"] - pole["loop-pi"]) < 0.05 and pole["loop-pi"] > 0.5
+    for label, fits in folds.items():
+        for m in fits:
+            assert abs(m["x"][2] - pole[label]) < 0.05, (label, m["x"][2], pole[label])
+    # loop-pid holds loop-pi (its tap at 0): its whole-log fit reads the log at least as well.
+    lik = {label: loop._log_lik_rows(m["x"], loop._Columns(loop.error_steps(counts, ref, STEP),
+                                                            label, counts), counts)[0]
+           for label, m in full.items()}
+    assert lik["loop-pid"] >= lik["loop-pi"] - 1e-6

@@ -972,21 +972,29 @@ def _loop_choice(labels, pick, plain, variants, passes) -> tuple[dict, str | Non
 
 
 def _fit_structures(t, counts, reference, step, structures, folds, threads, starts=None):
-    """Point fits of each structure on each fold's training cycles and on the whole log:
-    ``({label: [fold fits]}, {label: whole-log fit})``; ``starts`` (label -> (fold fits,
-    whole-log fit) of the structure without encoder terms) start them."""
+    """Point fits of each structure on the whole log and on each fold's training cycles:
+    ``({label: [fold fits]}, {label: whole-log fit})``. ``starts`` (label -> (fold fits,
+    whole-log fit) of the structure without encoder terms) start them; else a fold's fit
+    starts at the structure's whole-log fit (as the periodic comparison's folds start at the
+    whole log's sinusoid), and a whole-log fit of a structure with taps is the better of
+    least squares and the fit of the one with a tap fewer. The pole ``p`` of the lag and a
+    tap (a pole at 0) trade places: from least squares alone a fit on half the cycles, or a
+    structure with a tap on the whole log, can end at ``p`` near 0, far from the whole log's
+    pole, and lose to the periodic pick for it."""
     starts = starts or {}
+    full = dict(zip([s.label for s in structures], parallel.map_forked(_whole_log_job, [
+        (t, counts, reference, step, s.label,
+         None if starts.get(s.label) is None else starts[s.label][1]["x"])
+        for s in structures], threads)))
     jobs = []
     for s in structures:
         own = starts.get(s.label)
         jobs += [(t, counts, reference, step, s.label, train,
-                  None if own is None else own[0][f]["x"]) for f, (train, _) in enumerate(folds)]
-        jobs.append((t, counts, reference, step, s.label, None,
-                     None if own is None else own[1]["x"]))
+                  full[s.label]["x"] if own is None else own[0][f]["x"])
+                 for f, (train, _) in enumerate(folds)]
     fits = parallel.map_forked(_point_job, jobs, threads)
-    per = len(folds) + 1
-    fold_fits = {s.label: fits[per * i:per * i + len(folds)] for i, s in enumerate(structures)}
-    full = {s.label: fits[per * i + len(folds)] for i, s in enumerate(structures)}
+    n = len(folds)
+    fold_fits = {s.label: fits[n * i:n * (i + 1)] for i, s in enumerate(structures)}
     return fold_fits, full
 
 
@@ -1010,8 +1018,27 @@ def _heldout_units(x, cols, counts, train, test, cycle):
     return np.bincount(unit, weights=lp)
 
 
-def _point_job(t, counts, reference, step, structure, train, start=None):
-    return point_fit(t, counts, reference, step, structure, mask=train, start=start)
+def _point_job(t, counts, reference, step, structure, train, start=None, also=()):
+    """The best (highest log-posterior) of the point fits from ``start`` (least squares when
+    None) and from each row of ``also``."""
+    fits = [point_fit(t, counts, reference, step, structure, mask=train, start=x)
+            for x in (start, *also)]
+    return max(fits, key=lambda m: m["log_post"])
+
+
+def _whole_log_job(t, counts, reference, step, structure, start=None):
+    """The whole-log point fit from ``start``; with none, the better of least squares and,
+    for a structure with taps and no encoder term, the fit of the one with a tap fewer
+    extended by a tap at 0 (it holds that structure, so its fit from there is never worse).
+    A count jump keeps its own start (least squares with a step column): its fits cost
+    several times a plain one's."""
+    s = loop_structure(structure)
+    if start is not None or s.taps == 0 or s.effects:
+        return _point_job(t, counts, reference, step, s, None, start)
+    fewer = LoopFilter(s.taps - 1)
+    base = _whole_log_job(t, counts, reference, step, fewer)["x"]
+    nested = np.insert(base[:3 + fewer.n_coefficients], 3 + 3 + fewer.taps, 0.0)
+    return _point_job(t, counts, reference, step, s, None, None, (nested,))
 
 
 def posterior_predictive_dwell(result, t, counts, reference, seed, n_draws=40):
