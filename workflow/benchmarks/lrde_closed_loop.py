@@ -35,7 +35,8 @@ the readings' frame). Per draw the stage runs as
 ``config.yaml``, 2 processes) and records the chosen model, whether its 90 % intervals of
 ``A12`` and ``E_b`` hold the true values, whether the stage flags them untrusted,
 and its wall time beside a 5M-iteration Python loop timed just before it (the machine's
-speed at that moment). A log "the model describes" is one without an encoder effect whose motion
+speed at that moment), and the commit the stage ran (``code``; a ``+`` when the checkout
+differed from it). A log "the model describes" is one without an encoder effect whose motion
 repeats from cycle to cycle (standard deviations of the per-cycle stroke and bias below 0.05
 step): there an untrusted flag is false.
 
@@ -49,6 +50,7 @@ from __future__ import annotations
 
 import argparse
 import pathlib
+import subprocess
 import sys
 import time
 
@@ -130,6 +132,19 @@ def true_values(theta, reference, a_eff) -> dict:
             "bias_sd_steps": float(mid.std() / STEP)}
 
 
+def code_version() -> str:
+    """The checkout's commit (with ``+`` when its files differ from it), or ``unknown``: the
+    draws of one table may come from several versions of the stage."""
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, check=True,
+                              capture_output=True, text=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
+                               cwd=ROOT, check=True, capture_output=True, text=True).stdout
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    return head + ("+" if dirty.strip() else "")
+
+
 def one_draw(gains, effect, n_cycles, seed, settings, threads, command=True):
     rng = np.random.default_rng(seed)
     df, meta, truth = simulate_log(rng, gains, effect, n_cycles, command)
@@ -204,6 +219,10 @@ def summarise(draws: pd.DataFrame) -> pd.DataFrame:
                      "confident_miss": (g["A12_confident_miss"] | g["E_b_confident_miss"]).mean(),
                      "chosen": "|".join(f"{k}:{v}" for k, v in
                                         g["chosen"].value_counts().items()),
+                     # Rows recorded before the code column existed: "earlier".
+                     "code": "|".join(f"{k}:{v}" for k, v in g.get(
+                         "code", pd.Series("earlier", index=g.index)).fillna("earlier")
+                         .value_counts().items()),
                      "wall_s_median": g["wall_s"].median(), "wall_s_max": g["wall_s"].max(),
                      "wall_over_reference_median": (
                          (g["wall_s"] / g["reference_loop_s"]).median()
@@ -258,13 +277,14 @@ def main(argv=None):
                  + 1000 * c + i)
                 for i in range(args.first_draw, args.draws) for c in args.cycles for g in args.gains
                 for e in args.effects]
-        rows = []
+        rows, code = [], code_version()
         path = out / (f"lrde_closed_loop_draws_{k}of{n}.csv" if n > 1
                       else "lrde_closed_loop_draws.csv")
         for j, job in enumerate(jobs):
             if j % n != k:
                 continue
-            rows.append(one_draw(*job, settings, args.threads, not args.no_command))
+            rows.append(one_draw(*job, settings, args.threads, not args.no_command)
+                        | {"code": code})
             r = rows[-1]
             print(f"{r['gains']} {r['effect']} {r['cycles']} cyc seed {r['seed']}: "
                   f"{r['chosen']} trusted={r['trusted']} A12 cover={r['A12_cover']} "
