@@ -25,9 +25,11 @@ rounding channel of step/100 reads the motion (the stage's truth channel).
 The true values are those of the docs' definitions for a motion that is not a sinusoid,
 taken on the simulated angle at the sample instants (not on the fine channel: its rounding,
 up to a hundredth of a step per turning point, does not average out over the cycles of a
-motion that repeats exactly): ``A12`` the mean over the log's cycles (of the reference) of
-``max - min`` of the true angle (and, recorded beside it, ``max - min`` of the cycle-averaged true angle, the
-stroke of the periodic part a periodic model describes), the bias ``b`` the mean of
+motion that repeats exactly), over the cycles the stage averages over (from one upward
+crossing of the reference's mean to the next, :func:`true_values`): ``A12`` the mean of
+``max - min`` of the true angle (and, recorded beside it, ``max - min`` of the
+cycle-averaged true angle, the stroke of the periodic part a periodic model describes), the
+bias ``b`` the mean of
 ``(max + min) / 2``, and ``E_b = a + b - (m + 1/2) step`` in the frame of the fit's centre
 count ``m`` (with a missed count the counter's offset after it, so that both segments share
 the readings' frame). Per draw the stage runs as
