@@ -7,6 +7,7 @@ import pytest
 from matplotlib.figure import Figure
 
 from enclab.lrde import dwell, fit, model, pipeline, plots, report, simulate
+from enclab.lrde import loop as lrde_loop
 
 STEP = simulate.ROS_DRILL_STEP
 FAST = {"n_ensembles": 2, "n_walkers": 16, "n_steps": 120, "n_burn": 80, "ppc_draws": 8,
@@ -258,6 +259,23 @@ def test_a_truth_channel_term_joins_a_loop_structure_with_room_for_it():
     assert not any(v["trusted"] for v in trust.values())
     assert all("shows hysteresis, which this fit has no term for" in v["reason"]
                for v in trust.values())
+
+
+def test_a_loop_fit_at_its_jitter_floor_says_so():
+    from types import SimpleNamespace
+
+    step = 1e-3
+    loop_cmp = {"chosen": "loop-pi", "models": [{"label": "loop-pi", "delta_bic": 12.0}],
+                "check": {"z": 0.1}, "rule": "a rule"}
+
+    def note(sigma_q05):
+        fit_stub = SimpleNamespace(step=step, loop_params={},
+                                   summary={"sigma": {"q05": sigma_q05}})
+        return pipeline._loop_model_block({"chosen": "harmonic3"}, loop_cmp, fit_stub)["note"]
+
+    floor = lrde_loop.JITTER_FLOOR_STEPS * step
+    assert "lies at its floor" in note(1.01 * floor)
+    assert "floor" not in note(3.0 * floor)
 
 
 def test_an_effect_the_model_cannot_hold_flags_the_estimates_it_biases():

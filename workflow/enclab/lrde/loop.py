@@ -47,7 +47,7 @@ from enclab.core import parallel
 from enclab.lrde import effects as lrde_effects
 from enclab.lrde import fit as lrde_fit
 
-__all__ = ["STRUCTURES", "LOOP_EFFECTS", "LoopFilter", "JumpPlacement", "jump_placement",
+__all__ = ["STRUCTURES", "LOOP_EFFECTS", "JITTER_FLOOR_STEPS", "LoopFilter", "JumpPlacement", "jump_placement",
            "jump_window", "simulate_readings", "loop_structure", "error_steps",
            "reference_cycles", "point_fit", "fit_loop", "LoopFitResult",
            "compare_loop_models", "predictive_check", "posterior_predictive_dwell"]
@@ -67,6 +67,8 @@ _P_GRID = np.exp(-1.0 / np.array([0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0]))  # tau 
 # hundredth of a step, which widens the intervals of a noise-free log and leaves a noisy one's
 # (jitter of a few hundredths of a step) as they are. docs/low-resolution-encoder.md.
 _LOG_S_BOUNDS = (-2.0, lrde_fit._LOG_SIGMA_BOUNDS[1])
+#: The jitter's floor in steps (above).
+JITTER_FLOOR_STEPS = 10.0 ** _LOG_S_BOUNDS[0]
 _SMOOTH_LOG_S = np.log10(0.05)
 _W_BOUND = 1e3  # the coefficients' prior box (steps per unit column): wide, only a box
 
