@@ -343,3 +343,28 @@ def test_fold_fits_start_at_the_whole_logs_and_a_tap_at_the_fit_without():
                                                             label, counts), counts)[0]
            for label, m in full.items()}
     assert lik["loop-pid"] >= lik["loop-pi"] - 1e-6
+
+
+def test_the_report_shows_the_loop_structures_scores_and_both_rules():
+    rows = [{"label": "loop-pi", "over": "harmonic3", "elpd_per_cycle": -1.5,
+             "delta_elpd": 67.6, "delta_se": 2.3, "z": 29.4, "delta_bic": 174.1,
+             "passed": True},
+            {"label": "loop-pi+hysteresis", "over": "harmonic3", "elpd_per_cycle": -1.5,
+             "delta_elpd": 67.5, "delta_se": 2.3, "z": 29.3, "delta_bic": 166.5,
+             "passed": False, "over_plain": {"label": "loop-pi", "delta_elpd": -0.1,
+                                             "delta_se": 0.02, "passed": False}}]
+    periodic_rows = [{"label": "sinusoid", "elpd_per_cycle": -9.0},
+                     {"label": "harmonic3", "elpd_per_cycle": -5.0, "delta_elpd": 80.0,
+                      "delta_se": 9.0, "z": 8.9, "delta_bic": 70.0}]
+    chosen = {"models": periodic_rows, "chosen": "loop-pi", "rule": "the loop rule",
+              "loop": rows, "periodic": {"chosen": "harmonic3", "rule": "the periodic rule"}}
+    text = "\n".join(report._effect_lines({"model": chosen}))
+    assert "Rule: the periodic rule." in text and "Rule: the loop rule." in text
+    assert text.index("the periodic rule") < text.index("| loop structure |")
+    assert "| loop-pi+hysteresis | -1.500 | 67.5 +- 2.3 | 29.3 | 166.5 | -0.1 +- 0.0 (loop-pi) " \
+           "| no |" in text
+    # Not chosen: the periodic pick's block with the loop rows and their rule beside it.
+    kept = {"models": periodic_rows, "chosen": "harmonic3", "rule": "the periodic rule",
+            "loop": rows[:1], "loop_rule": "the loop rule"}
+    text = "\n".join(report._effect_lines({"model": kept}))
+    assert text.count("Rule: ") == 2 and "| loop-pi | -1.500 | 67.6 +- 2.3 |" in text

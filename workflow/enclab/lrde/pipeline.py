@@ -487,6 +487,7 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
         result, averaged = loop_fit, None
     elif loop_cmp is not None:
         model_block["loop"] = loop_cmp["models"]
+        model_block["loop_rule"] = loop_cmp["rule"]
     elif loop_not_offered:
         model_block["loop_not_offered"] = loop_not_offered
     if reference is not None:

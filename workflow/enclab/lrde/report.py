@@ -393,7 +393,11 @@ def _effect_lines(block: dict) -> list[str]:
         z = f"{r['z']:.1f}" if r.get("z") is not None else "-"
         bic = f"{r['delta_bic']:.1f}" if r.get("delta_bic") is not None else "-"
         lines.append(f"| {r['label']} | {r['elpd_per_cycle']:.3f} | {gain} | {z} | {bic} |")
-    lines += ["", f"Rule: {m['rule']}.", ""]
+    # With a loop structure chosen, the block's rule is the loop comparison's and the
+    # periodic comparison's is under "periodic".
+    periodic = m.get("periodic") or {}
+    lines += ["", f"Rule: {periodic.get('rule', m['rule'])}.", ""]
+    lines += _loop_lines(m.get("loop"), m["rule"] if periodic else m.get("loop_rule"))
     if m.get("loop_not_offered"):
         lines += [f"Loop structures not offered: {m['loop_not_offered']}.", ""]
     localized = (m.get("check") or {}).get("localized")
@@ -439,6 +443,25 @@ def _effect_lines(block: dict) -> list[str]:
     for k, reason in untrusted.items():
         lines.append(f"- {k} untrusted: {reason}.")
     return lines
+
+
+def _loop_lines(rows, rule) -> list[str]:
+    """The loop structures' held-out scores against the periodic pick (and, for one with an
+    encoder term, against the structure without it)."""
+    if not rows:
+        return []
+    lines = [f"| loop structure | held-out score per cycle [nats] | gain over {rows[0]['over']} "
+             "| z | delta BIC | gain over the structure without | passes |",
+             "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        z = f"{r['z']:.1f}" if r.get("z") is not None else "-"
+        plain = r.get("over_plain")
+        without = (f"{plain['delta_elpd']:.1f} +- {plain['delta_se']:.1f} ({plain['label']})"
+                   if plain else "-")
+        lines.append(f"| {r['label']} | {r['elpd_per_cycle']:.3f} | {r['delta_elpd']:.1f} +- "
+                     f"{r['delta_se']:.1f} | {z} | {r['delta_bic']:.1f} | {without} | "
+                     f"{'yes' if r.get('passed') else 'no'} |")
+    return lines + ([""] + ([f"Rule: {rule}.", ""] if rule else []))
 
 
 def _before_after_lines(block: dict) -> list[str]:
