@@ -29,11 +29,9 @@ motion that repeats exactly), over the cycles the stage averages over (from one 
 crossing of the reference's mean to the next, :func:`true_values`): ``A12`` the mean of
 ``max - min`` of the true angle (and, recorded beside it, ``max - min`` of the
 cycle-averaged true angle, the stroke of the periodic part a periodic model describes), the
-bias ``b`` the mean of
-``(max + min) / 2``, and ``E_b = a + b - (m + 1/2) step`` in the frame of the fit's centre
-count ``m`` (with a missed count the counter's offset after it, so that both segments share
-the readings' frame). Per draw the stage runs as
-``make run`` runs it (:func:`enclab.lrde.pipeline.analyse_lrde_log`, the ``lrde`` settings of
+bias ``b`` the mean of ``(max + min) / 2``, and ``E_b = a + b - (m + 1/2) step`` in the frame
+of the fit's centre count ``m`` (with a missed count the counter's offset after it, so that
+both segments share the readings' frame). Per draw the stage runs as ``make run`` runs it (:func:`enclab.lrde.pipeline.analyse_lrde_log`, the ``lrde`` settings of
 ``config.yaml``, 2 processes) and records the chosen model, whether its 90 % intervals of
 ``A12`` and ``E_b`` hold the true values, whether the stage flags them untrusted,
 and its wall time beside a 5M-iteration Python loop timed just before it (the machine's
