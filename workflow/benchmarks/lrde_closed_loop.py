@@ -31,10 +31,10 @@ crossing of the reference's mean to the next, :func:`true_values`): ``A12`` the 
 cycle-averaged true angle, the stroke of the periodic part a periodic model describes), the
 bias ``b`` the mean of ``(max + min) / 2``, and ``E_b = a + b - (m + 1/2) step`` in the frame
 of the fit's centre count ``m`` (with a missed count the counter's offset after it, so that
-both segments share the readings' frame). Per draw the stage runs as ``make run`` runs it (:func:`enclab.lrde.pipeline.analyse_lrde_log`, the ``lrde`` settings of
-``config.yaml``, 2 processes) and records the chosen model, whether its 90 % intervals of
-``A12`` and ``E_b`` hold the true values, whether the stage flags them untrusted,
-and its wall time beside a 5M-iteration Python loop timed just before it (the machine's
+both segments share the readings' frame). Per draw the stage runs as ``make run`` runs it
+(:func:`enclab.lrde.pipeline.analyse_lrde_log`, the ``lrde`` settings of ``config.yaml``, 2
+processes) and records the chosen model, whether its 90 % intervals of ``A12`` and ``E_b``
+hold the true values, whether the stage flags them untrusted, and its wall time beside a 5M-iteration Python loop timed just before it (the machine's
 speed at that moment), and the commit the stage ran (``code``; a ``+`` when the checkout
 differed from it). A log "the model describes" is one without an encoder effect whose motion
 repeats from cycle to cycle (standard deviations of the per-cycle stroke and bias below 0.05
