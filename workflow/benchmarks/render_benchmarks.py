@@ -73,9 +73,12 @@ TABLES = [
      "stage's findings, coverage of A12, E_b, a and b before and after (`lrde_truth_loop.py`)."),
     ("lrde_closed_loop.csv", "Low-resolution encoder: inside a PID loop",
      "The LRDE stage on closed-loop logs (paper 002 Fig. 5) per cell of gains and encoder "
-     "effect: coverage of the 90 % intervals of A12 (per-cycle stroke of the fine channel, and "
-     "the stroke of its cycle-averaged motion) and E_b, untrusted flags (also on the logs the "
-     "model describes), wall time (`lrde_closed_loop.py`; machine loaded, see the command)."),
+     "effect: coverage of the 90 % intervals of A12 (the true angle's mean stroke over the "
+     "reference's cycles, and the stroke of its cycle-averaged motion) and E_b, untrusted flags "
+     "(also on the logs the model describes), wall time (`lrde_closed_loop.py`; machine "
+     "loaded, see the command; `wall_over_reference` divides by a 5M-iteration Python loop "
+     "timed beside each log) and the commits the rows ran (`code`; `earlier`: rows recorded "
+     "before that column, by an older version of the stage)."),
     ("lrde_stage.csv", "Low-resolution encoder: stage cost",
      "Wall time of the whole LRDE stage of the embedded logs (`bench_lrde_stage.py`; target 30 s "
      "on 2 cores; `threads` is the stage's processes, 2 in the workflow)."),
