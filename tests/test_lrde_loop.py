@@ -296,7 +296,7 @@ def test_an_encoder_term_must_beat_its_structure_even_when_that_lost_to_the_pick
         return lambda a, b: (a, b) in wins
 
     # loop-pi loses to the periodic pick on a fold; its band variant beats the pick but not
-    # loop-pi: nothing is chosen (before, the variant was, with a band of width 0).
+    # loop-pi (a band of width 0 riding on a better fold fit): nothing is chosen.
     passed, chosen = loop._loop_choice(labels, "harmonic3", "loop-pi", variants,
                                        stub({("loop-pi+hysteresis", "harmonic3")}))
     assert chosen is None and not any(passed.values())
@@ -322,8 +322,8 @@ def test_an_encoder_term_must_beat_its_structure_even_when_that_lost_to_the_pick
 
 def test_fold_fits_start_at_the_whole_logs_and_a_tap_at_the_fit_without():
     # A soft loop read without noise (from the closed-loop benchmark's draws), where least
-    # squares alone left a fold's loop-pi fit and the whole-log loop-pid fit at a pole near 0
-    # (the lag and the tap trading places) and so lost them to the periodic pick.
+    # squares alone leaves a fold's loop-pi fit and the whole-log loop-pid fit at a pole near
+    # 0 (the lag and the tap trading places), which loses them to the periodic pick.
     from benchmarks import lrde_closed_loop as bench
 
     df, _, _ = bench.simulate_log(np.random.default_rng(20291208), "soft", "none", 20)
