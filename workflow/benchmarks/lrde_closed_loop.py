@@ -36,9 +36,9 @@ both segments share the readings' frame). Per draw the stage runs as ``make run`
 processes) and records the chosen model, whether its 90 % intervals of ``A12`` and ``E_b``
 hold the true values, whether the stage flags them untrusted, and its wall time beside a
 5M-iteration Python loop timed just before it (the machine's speed at that moment), and the
-commit the stage ran (``code``; a ``+`` when the checkout differed from it). A log "the model describes" is one without an encoder effect whose motion
-repeats from cycle to cycle (standard deviations of the per-cycle stroke and bias below 0.05
-step): there an untrusted flag is false.
+commit the stage ran (``code``; a ``+`` when the checkout differed from it). A log "the model
+describes" is one without an encoder effect whose motion repeats from cycle to cycle (standard
+deviations of the per-cycle stroke and bias below 0.05 step): there an untrusted flag is false.
 
 Usage (shards run side by side or one after another)::
 
@@ -112,8 +112,8 @@ def simulate_log(rng, gains, effect, n_cycles, command=True):
 
 def true_values(theta, reference, a_eff) -> dict:
     """The docs' definitions on the true angle, over the cycles the stage averages over (those
-    between the reference's upward crossings of its mean, :func:`enclab.lrde.loop.reference_cycles`):
-    a mean over other cycles differs by the cycle-to-cycle scatter of the stroke and bias, a
+    between the reference's upward crossings of its mean,
+    :func:`enclab.lrde.loop.reference_cycles`): a mean over other cycles differs by the cycle-to-cycle scatter of the stroke and bias, a
     few thousandths of a step on a noisy 20-cycle log, as much as the intervals' own width."""
     starts = loop.reference_cycles(reference)
     seg = slice(starts[0], starts[-1])

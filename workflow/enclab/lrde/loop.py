@@ -47,8 +47,8 @@ from enclab.core import parallel
 from enclab.lrde import effects as lrde_effects
 from enclab.lrde import fit as lrde_fit
 
-__all__ = ["STRUCTURES", "LOOP_EFFECTS", "JITTER_FLOOR_STEPS", "LoopFilter", "JumpPlacement", "jump_placement",
-           "jump_window", "simulate_readings", "loop_structure", "error_steps",
+__all__ = ["STRUCTURES", "LOOP_EFFECTS", "JITTER_FLOOR_STEPS", "LoopFilter", "JumpPlacement",
+           "jump_placement", "jump_window", "simulate_readings", "loop_structure", "error_steps",
            "reference_cycles", "point_fit", "fit_loop", "LoopFitResult",
            "compare_loop_models", "predictive_check", "posterior_predictive_dwell"]
 
@@ -1038,6 +1038,8 @@ def _whole_log_job(t, counts, reference, step, structure, start=None):
     if start is not None or s.taps == 0 or s.effects:
         return _point_job(t, counts, reference, step, s, None, start)
     fewer = LoopFilter(s.taps - 1)
+    # That structure's own job fits it too; fitting it again here (a fraction of a second)
+    # keeps every whole-log fit in one round of the pool instead of two.
     base = _whole_log_job(t, counts, reference, step, fewer)["x"]
     nested = np.insert(base[:3 + fewer.n_coefficients], 3 + 3 + fewer.taps, 0.0)
     return _point_job(t, counts, reference, step, s, None, None, (nested,))

@@ -160,10 +160,10 @@ def loop_command(df: pd.DataFrame, meta: dict, info: dict, source: str = "the lo
     set point, around which a quantized loop may still cycle) leaves the periodic models to
     describe the motion. A command with a sample that is not finite is bad input: a
     ValueError naming ``source`` (the file), the column and the sample."""
-    command = select_command(df, meta, info)
-    if command is None:
+    channel = _command_channel(meta, info)
+    if channel is None:
         return None, None
-    name = _command_channel(meta, info)["name"]
+    command, name = Channel.of(channel, df).values, channel["name"]
     bad = np.flatnonzero(~np.isfinite(command))
     if bad.size:
         raise ValueError(f"{source}: column {name!r}, row {bad[0]}: the command is not "
