@@ -41,6 +41,25 @@ def test_columns_reproduce_the_simulated_loop(kd, taps):
     assert np.max(np.abs(y - off)) > 1e-3
 
 
+def test_many_rows_motion_matches_the_filter_row_by_row():
+    # The series about the grid's poles (many rows at once) against scipy's filter per row,
+    # over the pole's whole range and across cell edges: the series' truncation is of order
+    # 1e-16 of the lag column's bound max|e| / (1 - p), so 1e-12 of it is rounding's margin
+    # over 2000-sample sums, far below the hundredth-of-a-step floor of the jitter.
+    rng = np.random.default_rng(11)
+    e = np.cumsum(rng.normal(0.0, 0.3, 2000))
+    e -= e.mean()
+    cols = loop._Columns(e, loop.LoopFilter(1))
+    lo, hi = loop._P_BOUNDS
+    p = np.concatenate((rng.uniform(lo, hi, 40), 1.0 - rng.uniform(1 - hi, 0.05, 40)))
+    x = np.column_stack((rng.normal(size=(p.size, 2)), p, rng.normal(size=(p.size, 6))))
+    together = cols.motion(x)
+    alone = np.array([cols.motion(row)[0] for row in x])
+    bound = np.abs(x[:, 7:8]) * np.abs(e).max() / (1.0 - p[:, None]) + np.abs(alone)
+    assert np.max(np.abs(together - alone) / bound) < 1e-12
+    # The cells in use are kept, and the cache stays bounded.
+    assert len(cols._lag_cache) <= loop._LAG_CACHE
+
 def test_error_and_cycles_checks():
     with pytest.raises(ValueError, match="shape of counts"):
         loop.error_steps(np.zeros(5, dtype=int), np.zeros(4), STEP)

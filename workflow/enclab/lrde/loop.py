@@ -71,6 +71,10 @@ _LOG_S_BOUNDS = (-2.0, lrde_fit._LOG_SIGMA_BOUNDS[1])
 JITTER_FLOOR_STEPS = 10.0 ** _LOG_S_BOUNDS[0]
 _SMOOTH_LOG_S = np.log10(0.05)
 _W_BOUND = 1e3  # the coefficients' prior box (steps per unit column): wide, only a box
+# Many rows' lag columns come from a series about the poles of a grid (_Columns.motion):
+# cells 0.05 wide in log(1 - p), 10 terms, the last 8 cells' terms kept; fewer rows than
+# _SERIES_ROWS (the point fits' single rows) are filtered one by one.
+_LAG_CELL, _LAG_TERMS, _LAG_CACHE, _SERIES_ROWS = 0.05, 10, 8, 4
 
 
 class LoopFilter:
@@ -218,15 +222,61 @@ class _Columns:
         trans[:k] = p ** self.j[:k]
         return lfilter([1.0], [1.0, -p], self.ed), trans
 
+    def _series_basis(self, cell):
+        """The pole ``p0`` of a grid cell and the rows ``fixed.T`` then the series terms
+        ``G_k = z^-k (1 - p0 z^-1)^-(k+1) e``, ``k < _LAG_TERMS``, kept for the cells last
+        used."""
+        cache = self.__dict__.setdefault("_lag_cache", {})
+        if cell in cache:
+            return cache[cell]
+        p0 = -np.expm1(cell * _LAG_CELL)
+        g = lfilter([1.0], [1.0, -p0], self.ed)
+        terms = [g]
+        for _ in range(_LAG_TERMS - 1):
+            g = lfilter([0.0, 1.0], [1.0, -p0], g)
+            terms.append(g)
+        if len(cache) >= _LAG_CACHE:
+            del cache[next(iter(cache))]
+        cache[cell] = (p0, np.vstack((self.fixed.T, np.stack(terms))))
+        return cache[cell]
+
     def motion(self, x):
         """``z - a`` in steps for internal rows ``x`` (a0, log s, p, w_ramp, w_I2, w_I1,
-        taps..., w_L, w_t): shape (rows, n)."""
+        taps..., w_L, w_t): shape (rows, n).
+
+        Many rows at once take their lag column ``L(p)`` from a series about the pole ``p0``
+        of their cell of a grid in ``log(1 - p)``: ``L(p) = sum_k (p - p0)^k G_k``
+        (:meth:`_series_basis`), exact as a power series. Within a cell ``|p - p0| / (1 -
+        p0)`` stays below ``_LAG_CELL / 2`` and the filter ``(1 - p0 z^-1)^-1`` gains at most
+        ``1 / (1 - p0)``, so the ``_LAG_TERMS`` terms leave an error of order ``1e-16`` of
+        ``max |e| / (1 - p0)``, the bound of ``L`` itself; the filter runs once per cell, not
+        once per row, and the columns and the series are one product.
+        """
         x = np.atleast_2d(x)
         nf = self.fixed.shape[1]
-        out = x[:, 3:3 + nf] @ self.fixed.T
-        for i, row in enumerate(x):
-            lag, trans = self.lag(row[2])
-            out[i] += row[3 + nf] * lag + row[4 + nf] * trans
+        p = x[:, 2]
+        if x.shape[0] < _SERIES_ROWS:
+            out = x[:, 3:3 + nf] @ self.fixed.T
+            for i, row in enumerate(x):
+                lag, trans = self.lag(row[2])
+                out[i] += row[3 + nf] * lag + row[4 + nf] * trans
+            return out
+        cells = np.rint(np.log1p(-p) / _LAG_CELL)
+        out = None
+        for cell in np.unique(cells):
+            p0, basis = self._series_basis(float(cell))
+            sel = cells == cell
+            rows = x if out is None and sel.all() else x[sel]
+            weights = np.hstack((rows[:, 3:3 + nf], rows[:, 3 + nf, None]
+                                 * (rows[:, 2:3] - p0) ** np.arange(_LAG_TERMS)))
+            if rows is x:
+                out = weights @ basis
+            else:
+                out = np.empty((x.shape[0], self.n)) if out is None else out
+                out[sel] = weights @ basis
+        # p^j where it exceeds 1e-18 for some row (as lag()).
+        k = min(self.n, int(np.ceil(np.log(1e-18) / np.log(p.max()))) + 1)
+        out[:, :k] += x[:, 4 + nf, None] * p[:, None] ** self.j[:k]
         return out
 
 
