@@ -41,3 +41,26 @@ def test_calls_of_different_functions_share_one_pool():
     out = parallel.call_forked(calls, 2)
     assert [out[0][0], out[1], out[2][0]] == [9, 5, 16]
     assert parallel.call_forked(calls, 1) == [(9, os.getpid()), 5, (16, os.getpid())]
+
+
+def _blas_threads():
+    from threadpoolctl import threadpool_info
+    return [pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas"]
+
+
+def test_forked_workers_run_blas_on_one_thread_each():
+    # numpy's BLAS is loaded here (numpy is imported), so each worker reports it.
+    before = _blas_threads()
+    assert before, "numpy's BLAS library not found by threadpoolctl"
+    forked = parallel.map_forked(_blas_threads, [()] * 4, 2)
+    assert all(threads == [1] * len(before) for threads in forked)
+    assert _blas_threads() == before  # the caller's own limit is left as it was
+
+
+def test_limit_blas_threads_sets_this_process_limit():
+    from threadpoolctl import threadpool_limits
+    with threadpool_limits(limits=None):  # restores the original limits on exit
+        parallel.limit_blas_threads(1)
+        assert set(_blas_threads()) == {1}
+        parallel.limit_blas_threads(0)  # fewer than one thread means one
+        assert set(_blas_threads()) == {1}

@@ -5,7 +5,9 @@ Wall time of the whole LRDE stage (fits, effect comparison, figures) per embedde
 Every log of the manifest whose ``analysis.stages`` holds ``lrde`` is ingested and run through
 :func:`enclab.lrde.pipeline.analyse_lrde_log` with ``config.yaml``'s ``lrde`` settings (and
 the log's own ``analysis.lrde``), as the ``lrde_fit`` rule does, ``--repeats`` times; the
-chosen model, the trust flags and a digest of the block are recorded with the time.
+chosen model, the trust flags and a digest of the block are recorded with the time, and
+beside it the mean of a 5M-iteration Python loop's wall time before and after the run
+(``reference_s``): ``wall_s / reference_s`` compares across machines and loads.
 
 Usage::
 
@@ -29,7 +31,7 @@ import zlib
 import pandas as pd
 import yaml
 
-from .helpers import ROOT, stamp
+from .helpers import ROOT, reference_loop_seconds, stamp
 
 
 def main(argv=None) -> None:
@@ -51,6 +53,12 @@ def main(argv=None) -> None:
         pass
     else:
         keep_freed_memory()  # as the rule's job process does (enclab.runner.run)
+    try:
+        from enclab.core.parallel import limit_blas_threads
+    except ImportError:  # older versions of the package
+        pass
+    else:
+        limit_blas_threads(args.threads)  # as the rule's job process does
     from enclab.lrde.pipeline import analyse_lrde_log
 
     config = yaml.safe_load(pathlib.Path(args.config).read_text())
@@ -67,11 +75,13 @@ def main(argv=None) -> None:
         settings.update((entry.get("analysis") or {}).get("lrde") or {})
         seed = [int(settings.pop("seed", 0)), zlib.crc32(meta["log_id"].encode())]
         for r in range(args.repeats):
+            ref_before = reference_loop_seconds(clock=time.perf_counter)
             started = time.perf_counter()
             # Older versions of the package have no threads argument.
             extra = {} if args.threads == 1 else {"threads": args.threads}
             block, figures, _, _ = analyse_lrde_log(df, meta, seed, settings, **extra)
             wall = time.perf_counter() - started
+            ref = 0.5 * (ref_before + reference_loop_seconds(clock=time.perf_counter))
             for fig in figures.values():
                 fig.clear()
             model = (block.get("model") or {}).get("chosen")
@@ -80,7 +90,7 @@ def main(argv=None) -> None:
             package = os.path.relpath(pathlib.Path(enclab.__file__).parent, ROOT)
             rows.append({"label": args.label, "package": package,
                          "log_id": meta["log_id"], "samples": len(df), "threads": args.threads, "repeat": r,
-                         "wall_s": wall, "model": model,
+                         "wall_s": wall, "reference_s": ref, "model": model,
                          "A12_trusted": (trust.get("A12") or {}).get("trusted"),
                          "converged": block["diagnostics"]["converged"],
                          # Same digest across repeats and thread counts: the block (and so

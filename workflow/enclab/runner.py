@@ -27,6 +27,7 @@ from typing import Any
 from enclab.core import atomic
 from enclab.core.allocator import keep_freed_memory
 from enclab.core.errors import EnclabInputError, failure_line
+from enclab.core.parallel import limit_blas_threads
 from enclab.progress import QUIET_JOBS_ENV
 
 __all__ = ["record_chunk", "run", "run_chunk", "error_line", "retry_token", "source_of"]
@@ -85,9 +86,10 @@ def run(smk: Any, main: Callable[[Any], None]) -> None:
     Messages go to the rule's log file and to stderr; to the log file only under the
     progress display of ``make run`` (:data:`enclab.progress.QUIET_JOBS_ENV`), which prints the
     failed job's line itself. A failure exits with status 1 after its line (and, for a bug,
-    its traceback) is logged.
+    its traceback) is logged. BLAS runs on at most the rule's ``threads``.
     """
     keep_freed_memory()
+    limit_blas_threads(getattr(smk, "threads", 1) or 1)
     path = _log_path(smk)
     quiet = bool(path) and bool(os.environ.get(QUIET_JOBS_ENV))
     handlers: list[logging.Handler] = [] if quiet else [logging.StreamHandler(sys.stderr)]
