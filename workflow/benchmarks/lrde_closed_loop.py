@@ -33,7 +33,7 @@ bias ``b`` the mean of ``(max + min) / 2``, and ``E_b = a + b - (m + 1/2) step``
 of the fit's centre count ``m`` (with a missed count the counter's offset after it, so that
 both segments share the readings' frame). Per draw the stage runs as ``make run`` runs it
 (:func:`enclab.lrde.pipeline.analyse_lrde_log`, the ``lrde`` settings of ``config.yaml``, 2
-processes) and records the chosen model, whether its 90 % intervals of ``A12`` and ``E_b``
+processes, freed memory kept and BLAS limited as in the rule's job) and records the chosen model, whether its 90 % intervals of ``A12`` and ``E_b``
 hold the true values, whether the stage flags them untrusted, and its wall time beside a
 5M-iteration Python loop timed just before it (the machine's speed at that moment), and the
 commit the stage ran (``code``; a ``+`` when the checkout differed from it). A log "the model
@@ -59,6 +59,8 @@ import pandas as pd
 import yaml
 
 
+from enclab.core.allocator import keep_freed_memory
+from enclab.core.parallel import limit_blas_threads
 from enclab.lrde import loop, pipeline, simulate
 
 from .helpers import ROOT, reference_loop_seconds, stamp
@@ -271,6 +273,10 @@ def main(argv=None):
             ap.error(f"--shard {args.shard}: K must be in 0..N-1")
         settings = dict(yaml.safe_load((ROOT / "config.yaml").read_text())["lrde"])
         settings.pop("seed")
+        # The process as the rule's job runs it (enclab.runner.run): freed memory kept,
+        # BLAS on the stage's threads.
+        keep_freed_memory()
+        limit_blas_threads(args.threads)
         if args.motion_models is not None:
             settings["motion_models"] = [yaml.safe_load(m) for m in args.motion_models]
         jobs = [(g, e, c, args.seed + 100_000 * EFFECTS.index(e) + 10_000 * list(GAINS).index(g)
