@@ -387,3 +387,29 @@ def test_the_report_shows_the_loop_structures_scores_and_both_rules():
             "loop": rows[:1], "loop_rule": "the loop rule"}
     text = "\n".join(report._effect_lines({"model": kept}))
     assert text.count("Rule: ") == 2 and "| loop-pi | -1.500 | 67.6 +- 2.3 |" in text
+
+
+def test_a_gain_held_by_one_cycle_does_not_cap_the_loop_rule():
+    from enclab.lrde import compare
+
+    # One unit d among n - 1 units g: the whole sum's z is 1 + n g / (d - g) exactly, below
+    # 2 once d > (n + 1) g, however decisive d is.
+    n, g = 19, 10.0
+    for d in (300.0, 3000.0):
+        diff = np.array([d] + [g] * (n - 1))
+        assert diff.sum() / compare._sum_se(diff) == pytest.approx(1 + n * g / (d - g), rel=1e-12)
+    # The held-out gains per cycle of loop-pid+count_jump over the periodic pick on the
+    # closed-loop benchmark's draw 20491219 (soft gains, one count missed): all 19 positive,
+    # the cycle holding the jump +540 nats; the whole sum's z is 1.49, the others' z over 10.
+    diff = np.array([8.6, 8.7, 8.7, 8.7, 8.7, 11.1, 12.2, 12.2, 12.3, 14.7, 16.4, 17.0, 17.1,
+                     17.1, 17.2, 17.2, 17.7, 18.5, 540.0])
+    assert diff.sum() / compare._sum_se(diff) < 2
+    assert loop._z_without_best(diff) > 10
+    # A gain that rests on that one cycle alone does not pass without it: the others scatter
+    # about 0 (z of 18 normal units: below 2 in 97.7 % of draws; this seed's is fixed).
+    rest = np.random.default_rng(1).normal(0.0, 3.0, 18)
+    assert loop._z_without_best(np.append(rest, 540.0)) == pytest.approx(
+        rest.sum() / compare._sum_se(rest))
+    assert loop._z_without_best(np.append(rest, 540.0)) < 2
+    # Fewer than two units left: no z.
+    assert loop._z_without_best(np.array([5.0, 1.0])) == 0.0
