@@ -397,7 +397,8 @@ def test_a_gain_held_by_one_cycle_does_not_cap_the_loop_rule():
     n, g = 19, 10.0
     for d in (300.0, 3000.0):
         diff = np.array([d] + [g] * (n - 1))
-        assert diff.sum() / compare._sum_se(diff) == pytest.approx(1 + n * g / (d - g), rel=1e-12)
+        z = diff.sum() / compare._sum_se(diff)
+        assert z == pytest.approx(1 + n * g / (d - g), rel=1e-12) and z < 2
     # The held-out gains per cycle of loop-pid+count_jump over the periodic pick on the
     # closed-loop benchmark's draw 20491219 (soft gains, one count missed): all 19 positive,
     # the cycle holding the jump +540 nats; the whole sum's z is 1.49, the others' z over 10.

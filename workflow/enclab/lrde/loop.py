@@ -892,8 +892,8 @@ def compare_loop_models(t, counts, reference, step, comparison, structures=tuple
     over all but its most favourable one (:func:`_z_without_best`), no fold is predicted
     worse by more than ``fold_se`` of that fold's standard errors and its full-log BIC
     (log-likelihood under the same time blur, a parameter costing ``ln N``; a count jump one
-    parameter) is lower; a structure later in the list replaces a passing one only by the same rule
-    against it. The structures are ``structures``, then the one of them with the best held-out
+    parameter) is lower; a structure later in the list replaces a passing one only by the
+    same rule against it. The structures are ``structures``, then the one of them with the best held-out
     score with each encoder term of ``effects`` (:data:`LOOP_EFFECTS`), fitted from its fits.
     A count jump is scored as in the periodic comparison: placed where the training fit puts
     it, anywhere between the two training samples around it with equal probability.
