@@ -55,9 +55,9 @@ def main(argv=None) -> None:
         keep_freed_memory()  # as the rule's job process does (enclab.runner.run)
     try:
         from enclab.core.parallel import limit_blas_threads
-    except ImportError:  # older versions of the package
-        pass
-    else:
+    except ImportError:  # older versions of the package run with BLAS's own default
+        limit_blas_threads = None
+    if limit_blas_threads is not None:
         limit_blas_threads(args.threads)  # as the rule's job process does
     from enclab.lrde.pipeline import analyse_lrde_log
 

@@ -205,6 +205,7 @@ class _Columns:
             fixed.append(np.concatenate((np.zeros(k), self.ed[:self.n - k])))
         self.fixed = np.column_stack(fixed)  # ramp, I2, I1, taps
         self.j = np.arange(n, dtype=float)
+        self._lag_cache = {}  # grid cell -> (p0, basis): _series_basis; shared by copies
 
     def for_counts(self, counts) -> "_Columns":
         """The same design for other readings (their own predecessors)."""
@@ -226,7 +227,7 @@ class _Columns:
         """The pole ``p0`` of a grid cell and the rows ``fixed.T`` then the series terms
         ``G_k = z^-k (1 - p0 z^-1)^-(k+1) e``, ``k < _LAG_TERMS``, kept for the cells last
         used."""
-        cache = self.__dict__.setdefault("_lag_cache", {})
+        cache = self._lag_cache
         if cell in cache:
             return cache[cell]
         p0 = -np.expm1(cell * _LAG_CELL)
@@ -261,19 +262,21 @@ class _Columns:
                 lag, trans = self.lag(row[2])
                 out[i] += row[3 + nf] * lag + row[4 + nf] * trans
             return out
-        cells = np.rint(np.log1p(-p) / _LAG_CELL)
-        out = None
-        for cell in np.unique(cells):
+        def product(rows, cell):
             p0, basis = self._series_basis(float(cell))
-            sel = cells == cell
-            rows = x if out is None and sel.all() else x[sel]
             weights = np.hstack((rows[:, 3:3 + nf], rows[:, 3 + nf, None]
                                  * (rows[:, 2:3] - p0) ** np.arange(_LAG_TERMS)))
-            if rows is x:
-                out = weights @ basis
-            else:
-                out = np.empty((x.shape[0], self.n)) if out is None else out
-                out[sel] = weights @ basis
+            return weights @ basis
+
+        cells = np.rint(np.log1p(-p) / _LAG_CELL)
+        unique = np.unique(cells)
+        if unique.size == 1:  # the usual case: no copy of the rows or of the product
+            out = product(x, unique[0])
+        else:
+            out = np.empty((x.shape[0], self.n))
+            for cell in unique:
+                sel = cells == cell
+                out[sel] = product(x[sel], cell)
         # p^j where it exceeds 1e-18 for some row (as lag()).
         k = min(self.n, int(np.ceil(np.log(1e-18) / np.log(p.max()))) + 1)
         out[:, :k] += x[:, 4 + nf, None] * p[:, None] ** self.j[:k]
