@@ -146,6 +146,35 @@ def test_fit_recovers_the_fine_channels_stroke_and_bias():
     assert a["q05"] - (a["q95"] - a["q05"]) <= prm["offset_a"] <= a["q95"] + (a["q95"] - a["q05"])
 
 
+def test_a_log_read_without_noise_keeps_the_true_filter_inside_its_posterior():
+    # Soft gains, no noise, 20 cycles after the pull-in (the closed-loop benchmark's draw
+    # 20291227): the readings' edges are hard, and the posterior's jitter sits at its floor.
+    # Edges softened by 0.01 step put the true filter 9 nats below the posterior's 5 %
+    # quantile of the log-posterior (and its stroke 2.3 half-widths outside the 90 % interval);
+    # at the floor the true filter must score like a posterior draw, which it falls below
+    # with probability 0.05.
+    df, prm = simulate.closed_loop_pid_log(
+        np.random.default_rng(0), amplitude=1.7869 * STEP, f_hz=20.0, fs_hz=2000.0,
+        n_cycles=50, offset_frac=0.0503, kp=400.0, ki=1500.0)
+    df = df.iloc[3000:].reset_index(drop=True)
+    t, counts, ref = df["t"].to_numpy(), df["counts"].to_numpy(), df["reference"].to_numpy()
+    structure = loop.loop_structure("loop-pi")
+    cols = loop._Columns(loop.error_steps(counts, ref, STEP), structure, counts)
+    pole = np.exp(-1.0 / (prm["fs_hz"] * prm["tau"]))
+    lag, trans = cols.lag(pole)
+    design = np.column_stack((np.ones(cols.n), cols.fixed, lag, trans))
+    coef, *_ = np.linalg.lstsq(design, df["theta"].to_numpy() / STEP, rcond=None)
+    bounds = loop._bounds(structure)
+    true_row = np.concatenate(([coef[0] + prm["offset_a"] / STEP, bounds[1, 0] + 1e-9, pole],
+                               coef[1:]))
+    assert np.array_equal(np.floor(cols.motion(true_row)[0] + true_row[0]), counts)
+    res = loop.fit_loop(t, counts, ref, STEP, 1, threads=2)
+    assert res.converged
+    posterior = loop._log_post(res.loop_samples, cols, counts, bounds)
+    truth = loop._log_post(true_row[None, :], cols, counts, bounds)[0]
+    assert truth >= np.quantile(posterior, 0.05), (truth, np.quantile(posterior, 0.05))
+
+
 def test_structure_labels_with_encoder_terms():
     s = loop.loop_structure("loop-pid+count_jump+hysteresis")
     assert (s.taps, s.effects) == (1, ("hysteresis", "count_jump"))

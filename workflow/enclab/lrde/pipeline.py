@@ -217,7 +217,7 @@ def _loop_model_block(model_block: dict, loop_cmp: dict, loop_fit, label=None,
     if sigma.get("q05", np.inf) < 1.5 * lrde_loop.JITTER_FLOOR_STEPS * loop_fit.step:
         out["note"] += (f"; the jitter lies at its floor of {lrde_loop.JITTER_FLOOR_STEPS:g} "
                         "step (readings with little or no noise): the intervals are those of "
-                        "edges softened by that floor, wider than the readings alone give")
+                        "the readings' edges softened by that much")
     return out
 
 
