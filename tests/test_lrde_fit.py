@@ -299,6 +299,17 @@ def test_pooled_posterior_is_the_equal_weight_mixture_of_the_fits():
         fit.pool_fits([a, _stub_fit(y, centre=1.0)])
     with pytest.raises(ValueError, match="at least two"):
         fit.pool_fits([a])
+    # Fits whose diagnostics are of their own parameters (loop structures: the filter's,
+    # one with a dead band's width too): the worst of each over the fits that sample it.
+    plain, band = _stub_fit(x), _stub_fit(y)
+    plain.tau, plain.rhat, plain.ess = {"p": 30.0}, {"p": 1.004}, {"p": 3000.0}
+    band.tau = {"p": 20.0, "hysteresis": 90.0}
+    band.rhat = {"p": 1.008, "hysteresis": 1.02}
+    band.ess = {"p": 5000.0, "hysteresis": 900.0}
+    loops = fit.pool_fits([plain, band])
+    assert loops.tau == {"p": 30.0, "hysteresis": 90.0}
+    assert loops.rhat == {"p": 1.008, "hysteresis": 1.02}
+    assert loops.ess == {"p": 3000.0, "hysteresis": 900.0}
 
 
 @pytest.mark.parametrize("amplitude_steps", [0.0, 0.3, 2.7, 40.0, 310.0])

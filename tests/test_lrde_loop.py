@@ -368,6 +368,39 @@ def test_an_encoder_term_must_beat_its_structure_even_when_that_lost_to_the_pick
                 ("loop-pi+hysteresis", "loop-pid")}))[1] == "loop-pi+hysteresis"
 
 
+def test_an_encoder_term_the_held_out_cycles_do_not_rule_out_is_pooled_with_the_pick():
+    # score(a, b) -> (delta, se, fold gains, passed) of a over b, from a table.
+    table = {("loop-pi+hysteresis", "loop-pi"): (-1.0, 20.4, [-3.0, 2.0], False),
+             ("loop-pi+hysteresis", "harmonic3"): (229.0, 29.8, [72.0, 157.0], False),
+             ("loop-pi+count_jump", "loop-pi"): (-227.8, 21.9, [-230.0, 2.2], False),
+             ("loop-pi+count_jump", "harmonic3"): (2.0, 220.0, [-146.0, 148.0], False)}
+    def score(a, b):
+        return table[(a, b)]
+
+    variants = ["loop-pi+hysteresis", "loop-pi+count_jump"]
+    # The band scores like the pick (within two standard errors): pooled. The jump is more
+    # than two standard errors worse, and predicts a fold worse than the periodic pick.
+    assert loop._loop_alternatives(variants, "loop-pi", "harmonic3", score, 2.0) == [
+        "loop-pi+hysteresis"]
+    # Better than the pick counts too; two standard errors below it does not.
+    table[("loop-pi+hysteresis", "loop-pi")] = (30.0, 10.0, [15.0, 15.0], False)
+    assert loop._loop_alternatives(variants, "loop-pi", "harmonic3", score, 2.0) == [
+        "loop-pi+hysteresis"]
+    table[("loop-pi+hysteresis", "loop-pi")] = (-20.5, 10.0, [-10.0, -10.5], False)
+    assert loop._loop_alternatives(variants, "loop-pi", "harmonic3", score, 2.0) == []
+    # A variant that predicts a fold worse than the periodic pick is no alternative.
+    table[("loop-pi+hysteresis", "loop-pi")] = (0.0, 10.0, [1.0, -1.0], False)
+    table[("loop-pi+hysteresis", "harmonic3")] = (50.0, 10.0, [60.0, -10.0], False)
+    assert loop._loop_alternatives(variants, "loop-pi", "harmonic3", score, 2.0) == []
+    # Nothing chosen, nothing pooled; the chosen variant is not its own alternative.
+    assert loop._loop_alternatives(variants, None, "harmonic3", score, 2.0) == []
+    table[("loop-pi+hysteresis", "harmonic3")] = (229.0, 29.8, [72.0, 157.0], False)
+    table[("loop-pi+hysteresis", "loop-pi+count_jump")] = (-300.0, 20.0, [-150.0, -150.0],
+                                                           False)
+    assert loop._loop_alternatives(variants, "loop-pi+count_jump", "harmonic3", score,
+                                   2.0) == []
+
+
 def test_fold_fits_start_at_the_whole_logs_and_a_tap_at_the_fit_without():
     # A soft loop read without noise (from the closed-loop benchmark's draws), where least
     # squares alone leaves a fold's loop-pi fit and the whole-log loop-pid fit at a pole near

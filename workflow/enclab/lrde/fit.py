@@ -944,9 +944,8 @@ def pool_fits(fits) -> FitResult:
     return FitResult(
         param_names=names, samples=samples, chains=None, a_eq_samples=a_eq, summary=summary,
         offset_a=offset_a, bias_b=bias_b, reason=first.reason if b is not None else _UNIDENTIFIED,
-        tau={k: max(f.tau[k] for f in fits) for k in names},
-        rhat={k: max(f.rhat[k] for f in fits) for k in names},
-        ess={k: min(f.ess[k] for f in fits) for k in names},
+        tau=_worst(fits, "tau", max), rhat=_worst(fits, "rhat", max),
+        ess=_worst(fits, "ess", min),
         converged=all(f.converged for f in fits), step=first.step,
         centre_count=first.centre_count, steps_pp=first.steps_pp, t_ref=first.t_ref,
         init=first.init, acceptance=float(np.mean([f.acceptance for f in fits])),
@@ -955,6 +954,15 @@ def pool_fits(fits) -> FitResult:
                   if k not in ("harmonics", "effects", "extra_scale", "bounds_internal")}
         | {"pooled": labels}, b_samples=b, stroke_samples=stroke,
         midpoint_samples=None if stroke is None else midpoint)
+
+
+def _worst(fits, name, pick) -> dict:
+    """Per parameter, the worst of the fits' diagnostic ``name``: over the paper's parameters
+    when every fit samples them (the periodic models), else over every parameter any fit
+    samples, among the fits that sample it (the loop structures' internal parameters)."""
+    keys = [k for k in PARAM_NAMES if all(k in getattr(f, name) for f in fits)]
+    keys = keys or list(dict.fromkeys(k for f in fits for k in getattr(f, name)))
+    return {k: pick(getattr(f, name)[k] for f in fits if k in getattr(f, name)) for k in keys}
 
 
 def map_fit(t, counts, step, f_hz=None, harmonics=(), effects=(), start=None,

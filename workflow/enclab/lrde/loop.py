@@ -911,9 +911,11 @@ def compare_loop_models(t, counts, reference, step, comparison, structures=tuple
     A count jump is scored as in the periodic comparison: placed where the training fit puts
     it, anywhere between the two training samples around it with equal probability.
     Returns ``models`` (per structure: ``label, delta_elpd, delta_se, z, delta_bic,
-    delta_elpd_halves``), ``chosen`` (label or None), ``fits`` (label -> whole-log point fit)
-    and, for a chosen structure, ``check`` (:func:`predictive_check`, ``trusted`` when
-    ``z >= trust_z``).
+    delta_elpd_halves``), ``chosen`` (label or None), ``alternatives`` (the encoder-term
+    structures the chosen one is pooled with: each predicts every fold better than the
+    periodic pick and scores no more than ``min_z`` standard errors below the chosen),
+    ``fits`` (label -> whole-log point fit) and, for a chosen structure, ``check``
+    (:func:`predictive_check`, ``trusted`` when ``z >= trust_z``).
     """
     from enclab.lrde import compare as lrde_compare
 
@@ -1006,14 +1008,18 @@ def compare_loop_models(t, counts, reference, step, comparison, structures=tuple
             row["over_plain"] = {"label": plain.label, "delta_elpd": d_plain,
                                  "delta_se": se_plain, "passed": passed_plain}
         models.append(row)
-    out = {"models": models, "chosen": chosen, "fits": full,
+    alternatives = _loop_alternatives(variant_labels, chosen, pick, score, min_z)
+    out = {"models": models, "chosen": chosen, "fits": full, "alternatives": alternatives,
            "rule": (f"a loop structure replaces the periodic pick when its held-out gain over "
                     f"it exceeds {min_z:g} standard errors (over every held-out cycle, or over "
                     f"all but its most favourable one), it predicts no fold worse by "
                     f"more than {fold_se:g} of that fold's standard errors and its full-log "
                     "delta BIC over it is positive (the periodic comparison's folds, units "
                     "and time blur); more taps or an encoder term only by the same rule "
-                    "against the structure without")}
+                    "against the structure without; the reported estimates pool the chosen "
+                    "structure's posterior with those of the encoder-term structures whose "
+                    f"held-out score is no more than {min_z:g} standard errors below its own "
+                    "and that predict each fold better than the periodic pick")}
     if chosen is not None:
         check = predictive_check(full[chosen], counts, reference,
                                  np.random.default_rng(seed))
@@ -1053,6 +1059,27 @@ def _loop_choice(labels, pick, plain, variants, passes) -> tuple[dict, str | Non
         if passed[label] and (chosen is None or passes(label, chosen)):
             chosen = label
     return passed, chosen
+
+
+def _loop_alternatives(variants, chosen, pick, score, min_z) -> list:
+    """The encoder-term structures (``variants``) pooled with the ``chosen`` one: each
+    predicts every fold better than the periodic ``pick`` and scores on the held-out cycles
+    no more than ``min_z`` standard errors below ``chosen``, or above it; ``score(a, b)``
+    gives ``(delta, se, fold gains, passed)`` of ``a`` over ``b``.
+
+    Unlike the periodic comparison's alternatives, one holding the chosen's terms and more
+    counts: the plain filter takes a narrow dead band in by moving its pole, so the two
+    score alike while their strokes differ by more than their widths
+    (docs/low-resolution-encoder.md).
+    """
+    out = []
+    for label in variants if chosen is not None else ():
+        if label == chosen:
+            continue
+        delta, se = score(label, chosen)[:2]
+        if min(score(label, pick)[2]) > 0 and delta > -min_z * se:
+            out.append(label)
+    return out
 
 
 def _fit_structures(t, counts, reference, step, structures, folds, threads, starts=None):

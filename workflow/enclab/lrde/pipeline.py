@@ -42,7 +42,9 @@ an added term, that model is fitted the same way and its posterior gives the rep
 models it cannot tell from its pick (``model.indistinguishable``), or, beside a kept sinusoid,
 models it does not rule out (``model.not_ruled_out``), each of them is fitted too and the
 reported estimates pool all their posteriors with equal weights (``averaged``,
-:func:`enclab.lrde.fit.pool_fits`; ``after`` stays the pick's own). ``trust`` says per
+:func:`enclab.lrde.fit.pool_fits`; ``after`` stays the pick's own). A chosen loop structure
+is pooled so with the loop comparison's ``alternatives`` (encoder-term structures it cannot
+rule out, :func:`enclab.lrde.loop.compare_loop_models`). ``trust`` says per
 quantity whether it can be relied on and why not. With a truth channel, what the residual
 stage found on the coarse channel (``references``) joins the final model and is set against
 its terms (``model.reference``).
@@ -423,29 +425,40 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
         after_kw = {"harmonics": harmonics, "effects": chosen + tuple(added),
                     "start": point["x"], **common}
         jobs.append((after_seed, after_kw))
-    loop_plan, loop_label, loop_added = None, None, []
+    loop_plans, loop_label, loop_added = [], None, []
     if loop_chosen:
         # The truth channel's encoder terms join the loop structure as they join the
-        # periodic pick (one term per structure).
+        # periodic pick (one term per structure); the same for its alternatives, which are
+        # fitted beside it (their seeds follow the pick's, which they leave as it is).
         loop_label, loop_added = _loop_with_reference(loop_cmp["chosen"], added)
+        labels = [loop_label]
+        for alternative in loop_cmp.get("alternatives", []):
+            label = _loop_with_reference(alternative, added)[0]
+            if label not in labels:
+                labels.append(label)
         sampler = _sampler_settings(settings)
-        loop_plan = lrde_loop.plan_loop_fit(  # its own point fit for a structure not compared
-            t, counts, command, step, fit_loop_seed, loop_label,
-            start=loop_cmp["fits"].get(loop_label),
+        seeds = [fit_loop_seed] + loop_seed.spawn(len(labels) - 1)
+        loop_plans = [lrde_loop.plan_loop_fit(  # own point fit for a structure not compared
+            t, counts, command, step, seed_i, label, start=loop_cmp["fits"].get(label),
             n_ensembles=sampler["n_ensembles"], max_steps=max(sampler["max_steps"], 250),
             truth=common["truth"], truth_step=common["truth_step"])
+            for seed_i, label in zip(seeds, labels)]
     try:
         # The loop's first round of ensembles shares one pool with the sinusoid's fit: the
         # sinusoid alone, then the ensembles, would leave a core idle.
         done = _run_fits(t, counts, step, jobs, threads,
-                         beside=loop_plan.calls if loop_plan else ())
+                         beside=[call for plan in loop_plans for call in plan.calls])
     except ValueError as err:
         raise ValueError(f"{where}: {err}") from err
     fits = done[:len(jobs)]
     result = fits[0]
     chosen_fit = fits[-1] if after_kw is not None else None
-    if loop_plan is not None:
-        loop_fit = loop_plan.finish(done[len(jobs):], threads)
+    loop_fits, first = [], len(jobs)
+    for plan in loop_plans:
+        loop_fits.append(plan.finish(done[first:first + len(plan.calls)], threads))
+        first += len(plan.calls)
+    if loop_fits:
+        loop_fit = loop_fits[0]
     # Models the held-out comparison cannot tell from the pick (or, when it keeps the
     # sinusoid, does not rule out): their posteriors are pooled with the pick's (equal
     # weights), so the reported intervals do not hang on the pick.
@@ -484,7 +497,19 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
         model_block = _loop_model_block(model_block, loop_cmp, loop_fit, loop_label,
                                         loop_added)
         _log.info("emcee fit of %s: %.1f s wall", loop_fit.label, loop_fit.wall_time_s)
-        result, averaged = loop_fit, None
+        # The pick's alternatives (the loop comparison's ``alternatives``) are pooled with it
+        # as the periodic pick's are: a plain filter and one with a narrow dead band read a
+        # log alike, with strokes apart by more than their widths.
+        result = loop_fit
+        averaged = fit.pool_fits(loop_fits) if len(loop_fits) > 1 else None
+        if averaged is not None:
+            model_block["indistinguishable"] = [f.label for f in loop_fits[1:]]
+            model_block["averaged_over"] = list(averaged.settings["pooled"])
+            model_block["note"] += (
+                f"; {', '.join(model_block['indistinguishable'])} scores on held-out cycles "
+                f"no more than two standard errors below {loop_fit.label}, or better: the "
+                "reported estimates pool their posteriors with equal weights ('after' is "
+                f"{loop_fit.label} alone)")
     elif loop_cmp is not None:
         model_block["loop"] = loop_cmp["models"]
         model_block["loop_rule"] = loop_cmp["rule"]
