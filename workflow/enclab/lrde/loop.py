@@ -766,7 +766,11 @@ class LoopFitPlan:
         accepted = sum(run.accepted for run in runs)
         kept = n_steps
         while True:
-            internal = np.stack(chains)  # (ensembles, steps, walkers, ndim)
+            # Chains extended past their first block keep their second half only: the first
+            # is further warm-up (the walkers start in a tiny ball about the point fit, and a
+            # log read with little noise takes them longer to fill its posterior).
+            window = max(n_steps, kept // 2)
+            internal = np.stack([c[-window:] for c in chains])  # (ensembles, steps, ...)
             tau, rhat, ess = lrde_fit._chain_diagnostics(internal, names)
             converged = bool(max(rhat.values()) <= 1.01 and min(ess.values()) >= 1000)
             if converged or kept >= max_steps:
@@ -834,8 +838,8 @@ class LoopFitPlan:
             init={k: v for k, v in init.items() if k != "cycles"},
             acceptance=float(np.mean(accepted) / (n_ensembles * (n_burn + kept))),
             wall_time_s=time.perf_counter() - started,
-            settings={"n_ensembles": n_ensembles, "n_walkers": n_walkers, "n_steps": kept,
-                      "n_burn": n_burn, "structure": s.label, "harmonics": [],
+            settings={"n_ensembles": n_ensembles, "n_walkers": n_walkers, "n_steps": window,
+                      "n_burn": n_burn + kept - window, "structure": s.label, "harmonics": [],
                       "effects": list(s.effects)},
             b_samples=b_draws, stroke_samples=stroke, midpoint_samples=np.zeros(rows.shape[0]),
             structure=s.label, loop_samples=rows, loop_names=names, jump_offsets=offsets,
