@@ -382,6 +382,13 @@ def test_an_encoder_term_the_held_out_cycles_do_not_rule_out_is_pooled_with_the_
     # than two standard errors worse, and predicts a fold worse than the periodic pick.
     assert loop._loop_alternatives(variants, "loop-pi", "harmonic3", score, 2.0) == [
         "loop-pi+hysteresis"]
+    # A jump is not pooled even when its loss on one cycle swells the standard error.
+    jump_within = dict(table)
+    jump_within[("loop-pi+count_jump", "loop-pi")] = (-580.0, 569.0, [-560.0, -20.0], False)
+    jump_within[("loop-pi+count_jump", "harmonic3")] = (862.0, 570.0, [300.0, 562.0], False)
+    assert loop._loop_alternatives(variants, "loop-pi", "harmonic3",
+                                   lambda a, b: jump_within[(a, b)], 2.0) == [
+        "loop-pi+hysteresis"]
     # Better than the pick counts too; two standard errors below it does not.
     table[("loop-pi+hysteresis", "loop-pi")] = (30.0, 10.0, [15.0, 15.0], False)
     assert loop._loop_alternatives(variants, "loop-pi", "harmonic3", score, 2.0) == [

@@ -915,7 +915,7 @@ def compare_loop_models(t, counts, reference, step, comparison, structures=tuple
     A count jump is scored as in the periodic comparison: placed where the training fit puts
     it, anywhere between the two training samples around it with equal probability.
     Returns ``models`` (per structure: ``label, delta_elpd, delta_se, z, delta_bic,
-    delta_elpd_halves``), ``chosen`` (label or None), ``alternatives`` (the encoder-term
+    delta_elpd_halves``), ``chosen`` (label or None), ``alternatives`` (the dead-band
     structures the chosen one is pooled with: each predicts every fold better than the
     periodic pick and scores no more than ``min_z`` standard errors below the chosen),
     ``fits`` (label -> whole-log point fit) and, for a chosen structure, ``check``
@@ -1021,7 +1021,7 @@ def compare_loop_models(t, counts, reference, step, comparison, structures=tuple
                     "delta BIC over it is positive (the periodic comparison's folds, units "
                     "and time blur); more taps or an encoder term only by the same rule "
                     "against the structure without; the reported estimates pool the chosen "
-                    "structure's posterior with those of the encoder-term structures whose "
+                    "structure's posterior with those of the dead-band structures whose "
                     f"held-out score is no more than {min_z:g} standard errors below its own "
                     "and that predict each fold better than the periodic pick")}
     if chosen is not None:
@@ -1066,7 +1066,7 @@ def _loop_choice(labels, pick, plain, variants, passes) -> tuple[dict, str | Non
 
 
 def _loop_alternatives(variants, chosen, pick, score, min_z) -> list:
-    """The encoder-term structures (``variants``) pooled with the ``chosen`` one: each
+    """The dead-band structures among ``variants`` pooled with the ``chosen`` one: each
     predicts every fold better than the periodic ``pick`` and scores on the held-out cycles
     no more than ``min_z`` standard errors below ``chosen``, or above it; ``score(a, b)``
     gives ``(delta, se, fold gains, passed)`` of ``a`` over ``b``.
@@ -1074,11 +1074,13 @@ def _loop_alternatives(variants, chosen, pick, score, min_z) -> list:
     Unlike the periodic comparison's alternatives, one holding the chosen's terms and more
     counts: the plain filter takes a narrow dead band in by moving its pole, so the two
     score alike while their strokes differ by more than their widths
-    (docs/low-resolution-encoder.md).
+    (docs/low-resolution-encoder.md). A count jump is no such term: where there is none, a
+    jump placed anyway loses hundreds of nats on its one cycle, which the standard error of
+    the sum, swollen by that cycle, does not rule out.
     """
     out = []
     for label in variants if chosen is not None else ():
-        if label == chosen:
+        if label == chosen or not loop_structure(label).dead_band:
             continue
         delta, se = score(label, chosen)[:2]
         if min(score(label, pick)[2]) > 0 and delta > -min_z * se:

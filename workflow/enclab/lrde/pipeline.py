@@ -43,7 +43,7 @@ models it cannot tell from its pick (``model.indistinguishable``), or, beside a 
 models it does not rule out (``model.not_ruled_out``), each of them is fitted too and the
 reported estimates pool all their posteriors with equal weights (``averaged``,
 :func:`enclab.lrde.fit.pool_fits`; ``after`` stays the pick's own). A chosen loop structure
-is pooled so with the loop comparison's ``alternatives`` (encoder-term structures it cannot
+is pooled so with the loop comparison's ``alternatives`` (dead-band structures it cannot
 rule out, :func:`enclab.lrde.loop.compare_loop_models`). ``trust`` says per
 quantity whether it can be relied on and why not. With a truth channel, what the residual
 stage found on the coarse channel (``references``) joins the final model and is set against
@@ -505,9 +505,11 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
         if averaged is not None:
             model_block["indistinguishable"] = [f.label for f in loop_fits[1:]]
             model_block["averaged_over"] = list(averaged.settings["pooled"])
+            alternatives = model_block["indistinguishable"]
             model_block["note"] += (
-                f"; {', '.join(model_block['indistinguishable'])} scores on held-out cycles "
-                f"no more than two standard errors below {loop_fit.label}, or better: the "
+                f"; {', '.join(alternatives)} score{'s' if len(alternatives) == 1 else ''} "
+                f"on held-out cycles no more than two standard errors below {loop_fit.label}, "
+                "or better: the "
                 "reported estimates pool their posteriors with equal weights ('after' is "
                 f"{loop_fit.label} alone)")
     elif loop_cmp is not None:
