@@ -368,7 +368,7 @@ def test_an_encoder_term_must_beat_its_structure_even_when_that_lost_to_the_pick
                 ("loop-pi+hysteresis", "loop-pid")}))[1] == "loop-pi+hysteresis"
 
 
-def test_an_encoder_term_the_held_out_cycles_do_not_rule_out_is_pooled_with_the_pick():
+def test_a_dead_band_the_held_out_cycles_do_not_rule_out_is_pooled_with_the_pick():
     # score(a, b) -> (delta, se, fold gains, passed) of a over b, from a table.
     table = {("loop-pi+hysteresis", "loop-pi"): (-1.0, 20.4, [-3.0, 2.0], False),
              ("loop-pi+hysteresis", "harmonic3"): (229.0, 29.8, [72.0, 157.0], False),
