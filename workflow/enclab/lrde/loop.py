@@ -66,8 +66,10 @@ _P_GRID = np.exp(-1.0 / np.array([0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0]))  # tau 
 # floor softens the edges, but Gaussian edges softened by more than the readings allow
 # penalise the true angle wherever it passes close to an edge, so the posterior moves off it:
 # on the closed-loop benchmark's 23 clean 20-cycle logs read without noise a floor of 0.01
-# step held the true A12 in 17 and E_b in 19 of the 90 % intervals, 10^-2.5 step in 22 and 22
-# (with 22 of 23 fits converged; 10^-3 step: 20). The posterior samples down to 10^-2.5 step.
+# step held the true A12 in 17 and E_b in 19 of the 90 % intervals, 10^-2.5 step in 21 and 23
+# with every fit converged (loop-pi alone, started as the stage starts it; started at a point
+# fit with the same floor, 22 of 23 converged, and at 10^-3 step 20). The posterior samples
+# down to 10^-2.5 step.
 # The point fits of the held-out comparison keep 0.01 step: from a soft start they stop far
 # from the sharp optimum below it, and their held-out scores need a smooth likelihood.
 # A noisy log's jitter (a few hundredths of a step) lies far above both.
