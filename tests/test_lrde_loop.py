@@ -483,3 +483,18 @@ def test_a_gain_held_by_one_cycle_does_not_cap_the_loop_rule():
     assert loop._z_without_best(np.append(rest, 540.0)) < 2
     # Fewer than two units left: no z.
     assert loop._z_without_best(np.array([5.0, 1.0])) == 0.0
+
+def test_the_encoder_terms_join_the_structure_the_rule_chooses_not_the_best_scoring_one():
+    # passes(a, b): a beats b by the comparison's rule; totals: summed held-out scores.
+    beats = {("loop-pi", "harmonic3"), ("loop-pid", "harmonic3")}
+    totals = {"loop-pi": 100.0, "loop-pid": 104.0}
+    labels = ["loop-pi", "loop-pid"]
+    passes = lambda a, b: (a, b) in beats  # noqa: E731
+    # The tap scores better but not by the rule against the structure without it.
+    assert loop._plain_for_terms(labels, "harmonic3", passes, totals.get) == "loop-pi"
+    # Once it passes against loop-pi, it carries the terms.
+    beats.add(("loop-pid", "loop-pi"))
+    assert loop._plain_for_terms(labels, "harmonic3", passes, totals.get) == "loop-pid"
+    # Neither beats the periodic pick: the best-scoring one (a term may still pass).
+    beats.clear()
+    assert loop._plain_for_terms(labels, "harmonic3", passes, totals.get) == "loop-pid"

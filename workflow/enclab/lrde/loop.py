@@ -912,8 +912,9 @@ def compare_loop_models(t, counts, reference, step, comparison, structures=tuple
     worse by more than ``fold_se`` of that fold's standard errors and its full-log BIC
     (log-likelihood under the same time blur, a parameter costing ``ln N``; a count jump one
     parameter) is lower; a structure later in the list replaces a passing one only by the
-    same rule against it. The structures are ``structures``, then the one of them with the best held-out
-    score with each encoder term of ``effects`` (:data:`LOOP_EFFECTS`), fitted from its fits.
+    same rule against it. The structures are ``structures``, then the one of them this rule
+    chooses (else the one with the best held-out score) with each encoder term of
+    ``effects`` (:data:`LOOP_EFFECTS`), fitted from its fits.
     A count jump is scored as in the periodic comparison: placed where the training fit puts
     it, anywhere between the two training samples around it with equal probability.
     Returns ``models`` (per structure: ``label, delta_elpd, delta_se, z, delta_bic,
@@ -951,35 +952,22 @@ def compare_loop_models(t, counts, reference, step, comparison, structures=tuple
                         for (train, test), m in zip(folds, fold_fits[label])]
         units[label][first] = units[label][first][1:]
 
-    for s in structures:
-        score_units(s.label)
-    totals = lambda label: [float(u.sum()) for u in units[label]]  # noqa: E731
-    plain = max(structures, key=lambda s: sum(totals(s.label))) if structures else None
-    variants = ([plain.with_effect(e) for e in effects if e not in plain.effects]
-                if plain is not None else [])
-    if variants:
-        # A dead band starts from the filter's own fits; a count jump from least squares
-        # with a step column (a fit without the jump bends the filter around it).
-        starts = {v.label: (fold_fits[plain.label], full[plain.label]) for v in variants
-                  if not v.count_jump}
-        more_folds, more_full = _fit_structures(t, counts, reference, step, variants, folds,
-                                                threads, starts)
-        fold_fits.update(more_folds)
-        full.update(more_full)
-        for v in variants:
-            score_units(v.label)
-    labels = [s.label for s in structures + variants]
-
     # Full-log log-likelihood under the same time blur, and parameter counts, for the BIC.
     blurred = {pick: float(comparison["full_fits"][pick]["log_lik_blurred"])}
     n_params = {pick: int(np.size(comparison["full_fits"][pick]["x"]))}
-    for label in labels:
+
+    def add(label):
+        score_units(label)
         cols = _Columns(error, label, counts)
         offsets = (jump_placement(full[label]["x"], cols, counts).offsets
                    if cols.structure.count_jump else None)
         blurred[label] = float(_log_lik_rows(full[label]["x"], cols, counts, time_blur=0.125,
                                              offsets=offsets)[0])
         n_params[label] = int(np.size(full[label]["x"])) + int(cols.structure.count_jump)
+
+    for s in structures:
+        add(s.label)
+    totals = lambda label: [float(u.sum()) for u in units[label]]  # noqa: E731
 
     def delta_bic(a, b):
         return (2.0 * (blurred[a] - blurred[b])
@@ -996,6 +984,25 @@ def compare_loop_models(t, counts, reference, step, comparison, structures=tuple
                       and lrde_compare._no_fold_worse(gains, ses, fold_se)
                       and delta_bic(a, b) > 0)
         return delta, se, gains, passed
+
+    plain = (loop_structure(_plain_for_terms([s.label for s in structures], pick,
+                                             lambda a, b: score(a, b)[3],
+                                             lambda label: sum(totals(label))))
+             if structures else None)
+    variants = ([plain.with_effect(e) for e in effects if e not in plain.effects]
+                if plain is not None else [])
+    if variants:
+        # A dead band starts from the filter's own fits; a count jump from least squares
+        # with a step column (a fit without the jump bends the filter around it).
+        starts = {v.label: (fold_fits[plain.label], full[plain.label]) for v in variants
+                  if not v.count_jump}
+        more_folds, more_full = _fit_structures(t, counts, reference, step, variants, folds,
+                                                threads, starts)
+        fold_fits.update(more_folds)
+        full.update(more_full)
+        for v in variants:
+            add(v.label)
+    labels = [s.label for s in structures + variants]
 
     variant_labels = [v.label for v in variants]
     passed, chosen = _loop_choice(labels, pick, plain and plain.label, variant_labels,
@@ -1065,6 +1072,17 @@ def _loop_choice(labels, pick, plain, variants, passes) -> tuple[dict, str | Non
         if passed[label] and (chosen is None or passes(label, chosen)):
             chosen = label
     return passed, chosen
+
+
+def _plain_for_terms(labels, pick, passes, total) -> str:
+    """The plain structure (of ``labels``) the encoder terms join: the one the rule of
+    :func:`_loop_choice` chooses over the periodic ``pick``, else the one with the largest
+    held-out ``total``. Not simply the best-scoring one: a tap that scores a little better by
+    chance, short of passing against the structure without it, would otherwise carry the dead
+    band, and the chosen structure would be pooled with a band structure of a tap more (whose
+    ensembles mix slowly) instead of its own."""
+    chosen = _loop_choice(labels, pick, None, [], passes)[1]
+    return chosen if chosen is not None else max(labels, key=total)
 
 
 def _loop_alternatives(variants, chosen, pick, score, min_z) -> list:
