@@ -34,7 +34,7 @@ of the fit's centre count ``m`` (with a missed count the counter's offset after 
 both segments share the readings' frame). Per draw the stage runs as ``make run`` runs it
 (:func:`enclab.lrde.pipeline.analyse_lrde_log`, the ``lrde`` settings of ``config.yaml``, 2
 processes, freed memory kept and BLAS limited as in the rule's job) and records the chosen
-model, whether its 90 % intervals of ``A12`` and ``E_b`` hold the true values, whether the
+model and the models whose posteriors the intervals pool (``averaged_over``), whether its 90 % intervals of ``A12`` and ``E_b`` hold the true values, whether the
 stage flags them untrusted, and its wall time beside a 5M-iteration Python loop timed just
 before it (the machine's speed at that moment), and the commit the stage ran (``code``; a
 ``+`` when the checkout differed from it). A log "the model
@@ -159,6 +159,8 @@ def one_draw(gains, effect, n_cycles, seed, settings, threads, command=True):
     row = {"gains": gains, "effect": effect, "cycles": n_cycles, "seed": seed,
            "command_channel": bool(command), "centre_count": block["centre_count"],
            "chosen": block["model"]["chosen"],
+           # The models whose posteriors the reported intervals pool ("" when the pick's own).
+           "averaged_over": "|".join(block["model"].get("averaged_over") or []),
            "trusted": all(v["trusted"] for v in block["trust"].values()),
            "converged": block["diagnostics"]["converged"], "wall_s": wall,
            "reference_loop_s": ref_s}
