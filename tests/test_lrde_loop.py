@@ -484,6 +484,7 @@ def test_a_gain_held_by_one_cycle_does_not_cap_the_loop_rule():
     # Fewer than two units left: no z.
     assert loop._z_without_best(np.array([5.0, 1.0])) == 0.0
 
+
 def test_the_encoder_terms_join_the_structure_the_rule_chooses_not_the_best_scoring_one():
     # passes(a, b): a beats b by the comparison's rule; totals: summed held-out scores.
     beats = {("loop-pi", "harmonic3"), ("loop-pid", "harmonic3")}

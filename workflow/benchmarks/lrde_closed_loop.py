@@ -34,10 +34,11 @@ of the fit's centre count ``m`` (with a missed count the counter's offset after 
 both segments share the readings' frame). Per draw the stage runs as ``make run`` runs it
 (:func:`enclab.lrde.pipeline.analyse_lrde_log`, the ``lrde`` settings of ``config.yaml``, 2
 processes, freed memory kept and BLAS limited as in the rule's job) and records the chosen
-model and the models whose posteriors the intervals pool (``averaged_over``), whether its 90 % intervals of ``A12`` and ``E_b`` hold the true values, whether the
-stage flags them untrusted, and its wall time beside a 5M-iteration Python loop timed just
-before it (the machine's speed at that moment), and the commit the stage ran (``code``; a
-``+`` when the checkout differed from it). A log "the model
+model and the models whose posteriors the intervals pool (``averaged_over``), whether its
+90 % intervals of ``A12`` and ``E_b`` hold the true values, whether the stage flags them
+untrusted, and its wall time beside a 5M-iteration Python loop timed just before it (the
+machine's speed at that moment), and the commit the stage ran (``code``; a ``+`` when the
+checkout differed from it). A log "the model
 describes" is one without an encoder effect whose motion repeats from cycle to cycle (standard
 deviations of the per-cycle stroke and bias below 0.05 step): there an untrusted flag is false.
 
