@@ -30,8 +30,8 @@ see :func:`enclab.lrde.compare.compare_effect_models`; ``loop_models`` (loop str
 offered when the log declares a channel with role ``"command"`` on the measured joint, default
 all of :data:`enclab.lrde.loop.STRUCTURES`; ``[]`` offers none), see
 :func:`enclab.lrde.loop.compare_loop_models`; the one its rule chooses (else the one with
-the best held-out score) is also offered with each term of ``effects`` a loop structure can carry (:data:`enclab.lrde.loop.LOOP_EFFECTS`: a
-dead band, a missed count). When a loop structure beats the periodic pick
+the best held-out score) is also offered with each term of ``effects`` a loop structure can
+carry (:data:`enclab.lrde.loop.LOOP_EFFECTS`: a dead band, a missed count). When a loop structure beats the periodic pick
 on the held-out cycles, its posterior (:func:`enclab.lrde.loop.fit_loop`) gives the reported
 estimates and ``after``; the periodic comparison's ``model`` entry moves to
 ``model.periodic`` and the loop's scores are under ``model.loop``.
