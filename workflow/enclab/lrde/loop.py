@@ -921,7 +921,7 @@ def compare_loop_models(t, counts, reference, step, comparison, structures=tuple
     delta_elpd_halves``), ``chosen`` (label or None), ``alternatives`` (the dead-band
     structures the chosen one is pooled with: each predicts every fold better than the
     periodic pick and scores no more than ``min_z`` standard errors below the chosen),
-    ``fits`` (label -> whole-log point fit) and, for a chosen structure, ``check``
+    ``min_z``, ``fits`` (label -> whole-log point fit) and, for a chosen structure, ``check``
     (:func:`predictive_check`, ``trusted`` when ``z >= trust_z``).
     """
     from enclab.lrde import compare as lrde_compare
@@ -1023,6 +1023,7 @@ def compare_loop_models(t, counts, reference, step, comparison, structures=tuple
         models.append(row)
     alternatives = _loop_alternatives(variant_labels, chosen, pick, score, min_z)
     out = {"models": models, "chosen": chosen, "fits": full, "alternatives": alternatives,
+           "min_z": min_z,
            "rule": (f"a loop structure replaces the periodic pick when its held-out gain over "
                     f"it exceeds {min_z:g} standard errors (over every held-out cycle, or over "
                     f"all but its most favourable one), it predicts no fold worse by "

@@ -31,8 +31,8 @@ offered when the log declares a channel with role ``"command"`` on the measured 
 all of :data:`enclab.lrde.loop.STRUCTURES`; ``[]`` offers none), see
 :func:`enclab.lrde.loop.compare_loop_models`; the one its rule chooses (else the one with
 the best held-out score) is also offered with each term of ``effects`` a loop structure can
-carry (:data:`enclab.lrde.loop.LOOP_EFFECTS`: a dead band, a missed count). When a loop structure beats the periodic pick
-on the held-out cycles, its posterior (:func:`enclab.lrde.loop.fit_loop`) gives the reported
+carry (:data:`enclab.lrde.loop.LOOP_EFFECTS`: a dead band, a missed count). When a loop
+structure beats the periodic pick on the held-out cycles, its posterior (:func:`enclab.lrde.loop.fit_loop`) gives the reported
 estimates and ``after``; the periodic comparison's ``model`` entry moves to
 ``model.periodic`` and the loop's scores are under ``model.loop``.
 
@@ -508,10 +508,9 @@ def analyse_lrde_log(df: pd.DataFrame, meta: dict, seed, settings: dict,
             alternatives = model_block["indistinguishable"]
             model_block["note"] += (
                 f"; {', '.join(alternatives)} score{'s' if len(alternatives) == 1 else ''} "
-                f"on held-out cycles no more than two standard errors below {loop_fit.label}, "
-                "or better: the "
-                "reported estimates pool their posteriors with equal weights ('after' is "
-                f"{loop_fit.label} alone)")
+                f"on held-out cycles no more than {loop_cmp['min_z']:g} standard errors "
+                f"below {loop_fit.label}, or better: the reported estimates pool their "
+                f"posteriors with equal weights ('after' is {loop_fit.label} alone)")
     elif loop_cmp is not None:
         model_block["loop"] = loop_cmp["models"]
         model_block["loop_rule"] = loop_cmp["rule"]
