@@ -58,7 +58,43 @@ def test_many_rows_motion_matches_the_filter_row_by_row():
     bound = np.abs(x[:, 7:8]) * np.abs(e).max() / (1.0 - p[:, None]) + np.abs(alone)
     assert np.max(np.abs(together - alone) / bound) < 1e-12
     # The cells in use are kept, and the cache stays bounded.
-    assert len(cols._lag_cache) <= loop._LAG_CACHE
+    assert len(cols._lag_cache) <= cols._lag_cache_cells
+
+
+def test_the_transient_powers_match_numpy_power():
+    # exp(j log p) against p ** j over the transient (j |log p| below 42 + |log p|): the
+    # rounding of log p (half an ulp) moves the exponent by at most ~42 ulp, 1e-14 relatively.
+    p = np.array(loop._P_BOUNDS + (0.5, 0.9, 0.99))
+    for pk in p:
+        k = loop._transient_length(pk, 10_000)
+        j = np.arange(k, dtype=float)
+        got = loop._powers(np.array([pk]), j)[0]
+        np.testing.assert_allclose(got, pk ** j, rtol=1e-13, atol=0)
+
+
+def test_the_lag_terms_of_every_cell_in_use_are_filtered_once(monkeypatch):
+    # A loosely held pole spreads the walkers over many cells of the grid: every cell's
+    # terms stay cached within the byte budget, so a second pass over the same rows filters
+    # nothing; under a tight budget the least recently used cell goes first.
+    rng = np.random.default_rng(5)
+    e = np.cumsum(rng.normal(0.0, 0.3, 2000))
+    cols = loop._Columns(e - e.mean(), loop.LoopFilter(1))
+    p = 1.0 - np.exp(-np.linspace(0.1, 5.0, 64))  # ~98 cells of log(1 - p) apart
+    x = np.column_stack((np.zeros((p.size, 2)), p, rng.normal(size=(p.size, 6))))
+    calls = []
+    real = loop.lfilter
+    monkeypatch.setattr(loop, "lfilter", lambda *a: calls.append(1) or real(*a))
+    first = cols.motion(x)
+    n_cells = len(np.unique(np.rint(np.log1p(-p) / loop._LAG_CELL)))
+    assert n_cells > loop._LAG_CACHE and len(calls) == n_cells * loop._LAG_TERMS
+    calls.clear()
+    np.testing.assert_array_equal(cols.motion(x), first)
+    assert calls == []
+    tight = loop._Columns(e - e.mean(), loop.LoopFilter(1))
+    tight._lag_cache_cells = 2
+    for cell in (1.0, 2.0, 1.0, 3.0):
+        tight._series_basis(cell)
+    assert list(tight._lag_cache) == [1.0, 3.0]
 
 def test_error_and_cycles_checks():
     with pytest.raises(ValueError, match="shape of counts"):
