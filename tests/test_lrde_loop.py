@@ -1,4 +1,6 @@
 """The loop motion model (enclab.lrde.loop): the logged error through a low-order filter."""
+import copy
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -370,6 +372,32 @@ def test_ensembles_beside_other_jobs_give_the_same_fit():
     np.testing.assert_array_equal(beside.loop_samples, here.loop_samples)
     np.testing.assert_array_equal(beside.samples, here.samples)
     assert (beside.rhat, beside.settings) == (here.rhat, here.settings)
+
+
+def test_the_chains_are_checked_after_half_the_burn_in_then_as_one_run(monkeypatch):
+    # The first round runs half the burn-in and a block; not converged, the chains go on to
+    # the full burn-in and by blocks, and what is kept is the end of the one run the
+    # ensembles would have made in one go (continued from their own random states).
+    df, _ = simulate.closed_loop_pid_log(np.random.default_rng(4), n_cycles=30,
+                                         noise_std=0.02 * STEP)
+    df = df.iloc[1000:].reset_index(drop=True)
+    args = (df["t"].to_numpy(), df["counts"].to_numpy(), df["reference"].to_numpy(), STEP, 9)
+    sizes = {"n_ensembles": 2, "n_walkers": 16, "n_steps": 10, "n_burn": 10, "max_steps": 20}
+    plan = loop.plan_loop_fit(*args, **sizes)
+    assert all(call[1][2] == 5 + 10 for call in plan.calls)
+    whole = [loop._sample_ensemble(*(job[:2] + (30,) + job[3:]))
+             for job in (copy.deepcopy(call[1]) for call in plan.calls)]
+    fit = plan.finish([f(*a) for f, a in copy.deepcopy(plan.calls)])
+    assert not fit.converged and (fit.settings["n_burn"], fit.settings["n_steps"]) == (20, 10)
+    np.testing.assert_array_equal(
+        fit.loop_samples, np.stack([w.chain[-10:] for w in whole]).reshape(fit.loop_samples.shape))
+    # Converged at the first check: the block after half the burn-in is kept.
+    monkeypatch.setattr(loop.lrde_fit, "_chain_diagnostics",
+                        lambda chains, names: ({}, {"a0": 1.0}, {"a0": 5000.0}))
+    fit = plan.finish([f(*a) for f, a in copy.deepcopy(plan.calls)])
+    assert fit.converged and (fit.settings["n_burn"], fit.settings["n_steps"]) == (5, 10)
+    np.testing.assert_array_equal(
+        fit.loop_samples, np.stack([w.chain[5:15] for w in whole]).reshape(fit.loop_samples.shape))
 
 
 def test_an_encoder_term_must_beat_its_structure_even_when_that_lost_to_the_pick():

@@ -79,6 +79,11 @@ TABLES = [
      "loaded, see the command; `wall_over_reference` divides by a 5M-iteration Python loop "
      "timed beside each log) and the commits the rows ran (`code`; `earlier`: rows recorded "
      "before that column, by an older version of the stage)."),
+    ("lrde_loop_burn_in.csv", "Low-resolution encoder: the loop posterior's burn-in",
+     "The loop structure each closed-loop log's stage chose, fitted with the stage's burn-in "
+     "(400 steps, checked after the first half) and with twice that, from the same seed: "
+     "shifts of the A12 and E_b medians in half-widths, ratios of the 90 % intervals' widths, "
+     "per group of chains that ended after half the burn-in or not (`lrde_loop_burn_in.py`)."),
     ("lrde_stage.csv", "Low-resolution encoder: stage cost",
      "Wall time of the whole LRDE stage of the embedded logs (`bench_lrde_stage.py`; target 30 s "
      "on 2 cores; `threads` is the stage's processes, 2 in the workflow)."),

@@ -79,6 +79,9 @@ _POINT_LOG_S_FLOOR = -2.0
 #: The posterior jitter's floor in steps (above).
 JITTER_FLOOR_STEPS = 10.0 ** _LOG_S_BOUNDS[0]
 _SMOOTH_LOG_S = np.log10(0.05)
+# The loop posterior's chains may end after half their burn-in when the log is noisy: a
+# median jitter of at least 0.01 step (benchmarks/lrde_loop_burn_in.py).
+_EARLY_LOG_S = _POINT_LOG_S_FLOOR
 _W_BOUND = 1e3  # the coefficients' prior box (steps per unit column): wide, only a box
 # Many rows' lag columns come from a series about the poles of a grid (_Columns.motion):
 # cells 0.05 wide in log(1 - p), 10 terms; fewer rows than _SERIES_ROWS (the point fits'
@@ -689,8 +692,10 @@ def fit_loop(t, counts, reference, step, seed, structure="loop-pi", start=None, 
     64 walkers per ensemble: with 32 the differential-evolution moves needed 500-1000 steps
     for R-hat <= 1.01 on 20-cycle closed-loop logs read without noise (integrated
     autocorrelation times of 40-80 steps), with 64 they converged within the first 250 (times
-    of 20-25 steps) at the same cost per sample. The ensembles run ``threads`` at a time;
-    the result does not depend on ``threads``.
+    of 20-25 steps) at the same cost per sample. The chains are first checked after half
+    of ``n_burn``, where those of a noisy log (median jitter 0.01 step or more) end when they
+    have converged; else after the whole burn-in (:meth:`LoopFitPlan.finish`). The ensembles
+    run ``threads`` at a time; the result does not depend on ``threads``.
 
     ``truth`` (rad, a fine channel) gives the bias ``b``: the mean over the reference's
     cycles of its turning points' midpoint, widened by half its rounding step; ``a = a_eq - b``.
@@ -741,7 +746,8 @@ def plan_loop_fit(t, counts, reference, step, seed, structure="loop-pi", start=N
                      bounds[:, 0] + margin, bounds[:, 1] - margin)
         random = np.random.RandomState(int(rng.integers(2**32)))
         sampler_state = np.random.RandomState(int(rng.integers(2**32))).get_state()
-        jobs.append((p0, random, n_burn + n_steps, cols, counts, bounds, None, sampler_state))
+        jobs.append((p0, random, _early_burn(n_burn) + n_steps, cols, counts, bounds, None,
+                     sampler_state))
     return LoopFitPlan(calls=[(_sample_ensemble, job) for job in jobs], started=started,
                        t=t, counts=counts, reference=reference, step=step, root=root, s=s,
                        cols=cols, x0=x0, bounds=bounds, names=names, cycles=cycles,
@@ -787,26 +793,34 @@ class LoopFitPlan:
         truth, truth_step, centre_count, started = (self.truth, self.truth_step,
                                                     self.centre_count, self.started)
         ndim = len(names)
-        chains = [run.chain[n_burn:] for run in runs]
+        chains = [run.chain for run in runs]
         accepted = sum(run.accepted for run in runs)
-        kept = n_steps
+        total = _early_burn(n_burn) + n_steps  # steps run, burn-in included
         while True:
-            # Chains extended past their first block keep their second half only: the first
-            # is further warm-up (the walkers start in a tiny ball about the point fit, and a
-            # log read with little noise takes them longer to fill its posterior).
+            # The first check comes after half the burn-in, and only a noisy log's chains
+            # end there: its soft edges let the ensembles fill the posterior within it. Else
+            # the chains go on to the full burn-in and are checked on the block after it,
+            # then extended by blocks; chains extended past that block keep their second
+            # half only: the first is further warm-up (the walkers start in a tiny ball about
+            # the point fit, and a log read with little noise takes them longer to fill its
+            # posterior).
+            kept = max(total - n_burn, n_steps)
             window = max(n_steps, kept // 2)
             internal = np.stack([c[-window:] for c in chains])  # (ensembles, steps, ...)
             tau, rhat, ess = lrde_fit._chain_diagnostics(internal, names)
             converged = bool(max(rhat.values()) <= 1.01 and min(ess.values()) >= 1000)
-            if converged or kept >= max_steps:
+            burnt = total >= n_burn + n_steps
+            if not burnt:
+                converged &= bool(np.median(internal[..., 1]) >= _EARLY_LOG_S)
+            if converged or (burnt and kept >= max_steps):
                 break
-            more = min(n_steps, max_steps - kept)
+            more = min(n_steps, max_steps - kept) if burnt else n_burn + n_steps - total
             runs = parallel.map_forked(_sample_ensemble, [
                 (run.coords, run.random, more, cols, counts, bounds, run.log_prob,
                  run.sampler_state) for run in runs], threads)
             chains = [np.concatenate((c, run.chain)) for c, run in zip(chains, runs)]
             accepted = accepted + sum(run.accepted for run in runs)
-            kept += more
+            total += more
         rows = internal.reshape(-1, ndim)
         f_hz = float((cycles.size - 1) / (t[cycles[-1]] - t[cycles[0]]))
         init = lrde_fit.initial_guess(t, counts, step)
@@ -861,14 +875,19 @@ class LoopFitPlan:
             ess=ess, converged=converged, step=float(step), centre_count=centre,
             steps_pp=int(init["steps_pp"]), t_ref=float(0.5 * (t[0] + t[-1])),
             init={k: v for k, v in init.items() if k != "cycles"},
-            acceptance=float(np.mean(accepted) / (n_ensembles * (n_burn + kept))),
+            acceptance=float(np.mean(accepted) / (n_ensembles * total)),
             wall_time_s=time.perf_counter() - started,
             settings={"n_ensembles": n_ensembles, "n_walkers": n_walkers, "n_steps": window,
-                      "n_burn": n_burn + kept - window, "structure": s.label, "harmonics": [],
+                      "n_burn": total - window, "structure": s.label, "harmonics": [],
                       "effects": list(s.effects)},
             b_samples=b_draws, stroke_samples=stroke, midpoint_samples=np.zeros(rows.shape[0]),
             structure=s.label, loop_samples=rows, loop_names=names, jump_offsets=offsets,
             loop_params=loop_params)
+
+
+def _early_burn(n_burn) -> int:
+    """Burn-in steps before the first convergence check (:meth:`LoopFitPlan.finish`)."""
+    return int(n_burn) // 2
 
 
 def _cycle_quantities(rows, cols, cycles, cycle_offset):
