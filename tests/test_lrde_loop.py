@@ -81,7 +81,7 @@ def test_the_lag_terms_of_every_cell_in_use_are_filtered_once(monkeypatch):
     rng = np.random.default_rng(5)
     e = np.cumsum(rng.normal(0.0, 0.3, 2000))
     cols = loop._Columns(e - e.mean(), loop.LoopFilter(1))
-    p = 1.0 - np.exp(-np.linspace(0.1, 5.0, 64))  # ~98 cells of log(1 - p) apart
+    p = 1.0 - np.exp(-np.linspace(0.1, 5.0, 64))  # 64 rows over 98 cells of log(1 - p)
     x = np.column_stack((np.zeros((p.size, 2)), p, rng.normal(size=(p.size, 6))))
     calls = []
     real = loop.lfilter
@@ -389,15 +389,16 @@ def test_the_chains_are_checked_after_half_the_burn_in_then_as_one_run(monkeypat
              for job in (copy.deepcopy(call[1]) for call in plan.calls)]
     fit = plan.finish([f(*a) for f, a in copy.deepcopy(plan.calls)])
     assert not fit.converged and (fit.settings["n_burn"], fit.settings["n_steps"]) == (20, 10)
-    np.testing.assert_array_equal(
-        fit.loop_samples, np.stack([w.chain[-10:] for w in whole]).reshape(fit.loop_samples.shape))
+    rows = fit.loop_samples.shape
+    np.testing.assert_array_equal(fit.loop_samples,
+                                  np.stack([w.chain[-10:] for w in whole]).reshape(rows))
     # Converged at the first check: the block after half the burn-in is kept.
     monkeypatch.setattr(loop.lrde_fit, "_chain_diagnostics",
                         lambda chains, names: ({}, {"a0": 1.0}, {"a0": 5000.0}))
     fit = plan.finish([f(*a) for f, a in copy.deepcopy(plan.calls)])
     assert fit.converged and (fit.settings["n_burn"], fit.settings["n_steps"]) == (5, 10)
-    np.testing.assert_array_equal(
-        fit.loop_samples, np.stack([w.chain[5:15] for w in whole]).reshape(fit.loop_samples.shape))
+    np.testing.assert_array_equal(fit.loop_samples,
+                                  np.stack([w.chain[5:15] for w in whole]).reshape(rows))
 
 
 def test_an_encoder_term_must_beat_its_structure_even_when_that_lost_to_the_pick():

@@ -92,8 +92,8 @@ _W_BOUND = 1e3  # the coefficients' prior box (steps per unit column): wide, onl
 # single rows) are filtered one by one. The cells' terms are kept, the least recently used
 # dropped first, up to _LAG_CACHE_BYTES (at least _LAG_CACHE cells): a walker ensemble whose
 # pole is loosely held spans tens of the grid's ~106 cells, and with only the last 8 cells
-# kept nearly every evaluation filtered its cells afresh (most of a fit's time on the
-# closed-loop benchmark's 40-cycle soft dead-band logs).
+# kept nearly every evaluation filtered its cells afresh (about half of the stage's time on
+# a 40-cycle soft-gain dead-band log of the closed-loop benchmark, profiled).
 _LAG_CELL, _LAG_TERMS, _LAG_CACHE, _SERIES_ROWS = 0.05, 10, 8, 4
 _LAG_CACHE_BYTES = 64 * 2**20
 
