@@ -1,4 +1,5 @@
 """Bayesian LRDE fit: likelihood numerics, recovery, identifiability, seeding."""
+import emcee
 import numpy as np
 import pytest
 from scipy.special import ndtr
@@ -392,3 +393,30 @@ def test_with_harmonics_A12_is_the_peak_to_peak_stroke_of_the_whole_motion():
     both = np.concatenate((sine.samples[:, 0], stroke[picks]))
     assert pooled.summary["A12"]["median"] == np.median(both)
     np.testing.assert_array_equal(r.take([3, 1]).stroke, stroke[[3, 1]])
+
+
+def test_a_walker_that_never_moved_leaves_the_chain_diagnostics_defined():
+    # AR(1) walkers (tau = 19) in 4 ensembles; one walker of one ensemble holds its value the
+    # whole window. Its autocorrelation is 0/0: the time is the other walkers' (emcee on them
+    # alone), the same whatever the parameters' order, and the convergence flag with it.
+    rng = np.random.default_rng(8)
+    phi, n_steps, n_walkers = 0.9, 400, 16
+    x = np.empty((4, n_steps, n_walkers, 2))
+    x[:, 0] = rng.normal(0.0, 1.0 / np.sqrt(1 - phi**2), (4, n_walkers, 2))
+    for j in range(1, n_steps):
+        x[:, j] = phi * x[:, j - 1] + rng.normal(size=(4, n_walkers, 2))
+    x[2, :, 5, :] = x[2, 0, 5, :]
+    tau, rhat, ess = fit._chain_diagnostics(x, ["a", "b"])
+    for i, name in enumerate("ab"):
+        expected = max(
+            float(emcee.autocorr.integrated_time(
+                np.delete(x[e, :, :, i], 5, axis=1)[:, :, None] if e == 2
+                else x[e, :, :, i:i + 1], quiet=True)[0]) for e in range(4))
+        assert tau[name] == pytest.approx(expected, rel=1e-12)
+        assert np.isfinite(rhat[name]) and ess[name] == pytest.approx(x[..., i].size / expected)
+    flipped = fit._chain_diagnostics(x[..., ::-1], ["b", "a"])
+    assert flipped[0] == pytest.approx(tau) and flipped[2] == pytest.approx(ess)
+    # An ensemble none of whose walkers moved: no time is defined, and no sample counts.
+    x[1] = x[1, :1]
+    tau, _, ess = fit._chain_diagnostics(x, ["a", "b"])
+    assert tau == {"a": np.inf, "b": np.inf} and ess == {"a": 0.0, "b": 0.0}

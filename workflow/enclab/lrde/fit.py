@@ -68,6 +68,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -621,17 +622,30 @@ def _check_int_counts(counts, n):
 
 def _chain_diagnostics(internal: np.ndarray, names) -> tuple[dict, dict, dict]:
     """Integrated autocorrelation time (largest over ensembles), split R-hat across ensembles
-    and ESS per parameter of chains shaped (n_ensembles, n_steps, n_walkers, ndim)."""
+    and ESS per parameter of chains shaped (n_ensembles, n_steps, n_walkers, ndim).
+
+    A walker that holds one value over the whole window (every move it was offered was
+    rejected) has no autocorrelation function (emcee's is 0/0 there): the time is that of the
+    ensemble's other walkers, and infinite when none moved. Without this, one such walker
+    made the time NaN, and the largest and smallest over parameters, and so the convergence
+    flag, depended on the parameters' order."""
     tau, rhat, ess = {}, {}, {}
     for i, name in enumerate(names):
-        with _quiet_emcee():
-            tau_i = max(float(emcee.autocorr.integrated_time(internal[e, :, :, i:i + 1],
-                                                              quiet=True)[0])
-                        for e in range(internal.shape[0]))
+        tau_i = max(_integrated_time(internal[e, :, :, i]) for e in range(internal.shape[0]))
         tau[name] = tau_i
         rhat[name] = diagnostics.split_rhat_ensembles(internal[:, :, :, i])
         ess[name] = float(internal[:, :, :, i].size / max(tau_i, 1.0))
     return tau, rhat, ess
+
+
+def _integrated_time(x) -> float:
+    """emcee's integrated autocorrelation time of one ensemble's chain ``(steps, walkers)``,
+    over the walkers that moved (infinite when none did)."""
+    moved = np.ptp(x, axis=0) > 0
+    if not moved.any():
+        return math.inf
+    with _quiet_emcee():
+        return float(emcee.autocorr.integrated_time(x[:, moved, None], quiet=True)[0])
 
 
 def truth_rounding_bound(amplitude, truth_step, n_terms=4000) -> float:

@@ -28,6 +28,12 @@ def _num(value):
     return value if math.isfinite(value) else None
 
 
+def _fmt(value, spec) -> str:
+    """``value`` formatted, or "not defined" for a value the block holds as None (not
+    finite: an autocorrelation time no walker's chain defines is infinite)."""
+    return "not defined" if value is None else format(value, spec)
+
+
 def _triple(d):
     return None if d is None else {k: _num(d[k]) for k in ("median", "q05", "q95")}
 
@@ -371,9 +377,9 @@ def report_markdown(block: dict, log_id: str | None = None) -> str:
         lines.append(f"Proposition 1 (|E_b| < epsilon/2 = {d['prop1_epsilon_half'] * deg:.4f} "
                      f"deg): {'holds' if d['prop1_in_band'] else 'violated'} on average, in "
                      f"{100 * d['prop1_fraction_cycles']:.0f} % of cycles.")
-    lines += ["", f"Sampler diagnostics: max split R-hat {diag['rhat_max']:.4f}, min ESS "
-              f"{diag['ess_min']:.0f}, max tau {diag['tau_max']:.1f} steps -> "
-              f"{'converged' if diag['converged'] else _NOT_CONVERGED}."]
+    lines += ["", f"Sampler diagnostics: max split R-hat {_fmt(diag['rhat_max'], '.4f')}, "
+              f"min ESS {_fmt(diag['ess_min'], '.0f')}, max tau {_fmt(diag['tau_max'], '.1f')} "
+              f"steps -> {'converged' if diag['converged'] else _NOT_CONVERGED}."]
     lines += _effect_lines(block)
     return "\n".join(lines) + "\n"
 
