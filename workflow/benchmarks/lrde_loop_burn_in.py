@@ -95,12 +95,16 @@ def main(argv=None) -> int:
     ap.add_argument("--draws-table", default=str(ROOT / "docs" / "benchmarks"
                                                  / "lrde_closed_loop_draws.csv"),
                     help="the closed-loop benchmark's draws: cells, seeds, chosen structures")
+    ap.add_argument("--code", default=None,
+                    help="only the draws the table recorded at this commit (its code column)")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--out", default=str(ROOT / "results" / "benchmarks"))
     args = ap.parse_args(argv)
     table = pd.read_csv(args.draws_table)
     if "command_channel" in table:
         table = table[table["command_channel"].fillna(False).astype(bool)]
+    if args.code is not None:
+        table = table[table["code"].astype(str) == args.code]
     table = table[table["cycles"].isin(args.cycles)
                   & table["chosen"].astype(str).str.startswith("loop-")]
     table = table.drop_duplicates(["cycles", "gains", "effect", "seed"], keep="last")
