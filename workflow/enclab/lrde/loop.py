@@ -80,9 +80,9 @@ _POINT_LOG_S_FLOOR = -2.0
 JITTER_FLOOR_STEPS = 10.0 ** _LOG_S_BOUNDS[0]
 _SMOOTH_LOG_S = np.log10(0.05)
 # The loop posterior's chains may end after half their burn-in when the log is noisy: a
-# median jitter of at least 0.01 step. On the 23 closed-loop benchmark logs (read with a
+# median jitter of at least 0.01 step. On the 46 closed-loop benchmark logs (read with a
 # jitter of 0.02 step) whose chains ended there, doubling the burn-in moved the medians of
-# A12 and E_b by at most 0.06 half-widths and the intervals' widths by at most 4 %, and the
+# A12 and E_b by at most 0.06 half-widths and the intervals' widths by at most 7 %, and the
 # fit took 0.74 of the time (median); logs read without noise sit near the jitter's floor,
 # where the ensembles spread more slowly (benchmarks/lrde_loop_burn_in.py).
 _EARLY_LOG_S = _POINT_LOG_S_FLOOR
