@@ -32,9 +32,10 @@ all of :data:`enclab.lrde.loop.STRUCTURES`; ``[]`` offers none), see
 :func:`enclab.lrde.loop.compare_loop_models`; the one its rule chooses (else the one with
 the best held-out score) is also offered with each term of ``effects`` a loop structure can
 carry (:data:`enclab.lrde.loop.LOOP_EFFECTS`: a dead band, a missed count). When a loop
-structure beats the periodic pick on the held-out cycles, its posterior (:func:`enclab.lrde.loop.fit_loop`) gives the reported
-estimates and ``after``; the periodic comparison's ``model`` entry moves to
-``model.periodic`` and the loop's scores are under ``model.loop``.
+structure beats the periodic pick on the held-out cycles, its posterior
+(:func:`enclab.lrde.loop.fit_loop`) gives the reported estimates and ``after``; the periodic
+comparison's ``model`` entry moves to ``model.periodic`` and the loop's scores are under
+``model.loop``.
 
 The paper's sinusoid is fitted first (``before``); when the comparison chooses a model with
 an added term, that model is fitted the same way and its posterior gives the reported
